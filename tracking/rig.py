@@ -1,0 +1,230 @@
+"""Rig file: one YAML file that describes an installation to the tracker.
+
+Frames (paper, Fig. 8): the jacket frame has x to port, y astern, z up, in metres. The topside
+frame is the frame fixed to the topside that coincides with the jacket frame when the topside is
+mated, so every offset is zero when mated.
+
+A marker's frame is OpenCV's: origin at the marker centre, x to the right and y up as seen by
+someone facing the marker, z out of the face towards that viewer. A marker on face ``astern``
+looks astern (+y); its x axis then points to starboard (-x).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+import cv2
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from tracking.errors import InputError
+
+Body = Literal["jacket", "topside"]
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+
+_D = float(np.sqrt(0.5))
+FACE_NORMALS: dict[str, tuple[float, float, float]] = {
+    "port": (1.0, 0.0, 0.0),
+    "starboard": (-1.0, 0.0, 0.0),
+    "astern": (0.0, 1.0, 0.0),
+    "ahead": (0.0, -1.0, 0.0),
+    "port-astern": (_D, _D, 0.0),
+    "port-ahead": (_D, -_D, 0.0),
+    "starboard-astern": (-_D, _D, 0.0),
+    "starboard-ahead": (-_D, -_D, 0.0),
+}
+UP = np.array([0.0, 0.0, 1.0])
+MATED_TOLERANCE_M = 0.005
+
+
+def normal_rotation(normal: np.ndarray) -> np.ndarray:
+    """R_body_marker (3, 3) for a face with outward normal (3,): marker z = normal, marker y as near up as can be."""
+    z = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    ref = UP if abs(z @ UP) < 0.95 else np.array([0.0, -1.0, 0.0])
+    y = ref - (ref @ z) * z
+    y /= np.linalg.norm(y)
+    return np.column_stack([np.cross(y, z), y, z])
+
+
+def face_rotation(face: str) -> np.ndarray:
+    """R_body_marker (3, 3) of a marker on a named vertical face (port, astern, port-ahead, ...)."""
+    return normal_rotation(np.array(FACE_NORMALS[face]))
+
+
+def aruco_dictionary_names() -> list[str]:
+    """Names of OpenCV's predefined ArUco dictionaries (DICT_6X6_250, ...)."""
+    return sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_"))
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Marker(_Model):
+    """One ArUco marker: its id, the body it is fixed to, its cone and face, its centre in the body frame."""
+
+    id: int = Field(ge=0)
+    body: Body
+    cone: str = Field(min_length=1)
+    face: str = Field(min_length=1)  # a name from FACE_NORMALS, or any label when `normal` is given
+    center: Vec3
+    normal: Vec3 | None = None  # outward face normal in the body frame; default: the named face's
+
+    @model_validator(mode="after")
+    def _face_known(self) -> Marker:
+        if self.normal is None and self.face not in FACE_NORMALS:
+            raise ValueError(f"face: unknown face {self.face!r} (expected one of {', '.join(FACE_NORMALS)}, "
+                             "or give normal: [x, y, z])")
+        if self.normal is not None and np.linalg.norm(self.normal) < 1e-9:
+            raise ValueError("normal: must not be zero")
+        return self
+
+    @property
+    def T_body_marker(self) -> np.ndarray:
+        """(4, 4) pose of the marker in its body's frame."""
+        T = np.eye(4)
+        T[:3, :3] = normal_rotation(np.array(self.normal)) if self.normal else face_rotation(self.face)
+        T[:3, 3] = self.center
+        return T
+
+
+class Pair(_Model):
+    """A jacket marker and the topside marker above it, in one plane when mated."""
+
+    cone: str
+    face: str
+    jacket: int
+    topside: int
+    mated: Vec3 | None = None  # topside marker centre minus jacket marker centre when mated, jacket frame, m
+
+
+class CameraEntry(_Model):
+    """A camera: its calibration file, its video source and its clock offset."""
+
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
+    calibration: str
+    source: str
+    time_offset: float = 0.0  # s, added to the video's timestamps to give capture time on the common clock
+
+
+class Rig(_Model):
+    """An installation as the tracker sees it."""
+
+    name: str = "installation"
+    dictionary: str = "DICT_6X6_250"
+    marker_size: float = Field(gt=0)  # edge of the black square, m
+    cones: dict[str, Vec3] = Field(default_factory=dict)  # cone tip on the jacket, jacket frame, m
+    markers: list[Marker]
+    pairs: list[Pair] = Field(default_factory=list)
+    cameras: list[CameraEntry] = Field(default_factory=list)
+    base_dir: Path = Field(default=Path("."), exclude=True)
+
+    @field_validator("dictionary")
+    @classmethod
+    def _known_dictionary(cls, value: str) -> str:
+        if not hasattr(cv2.aruco, value) or not value.startswith("DICT_"):
+            raise ValueError(f"unknown ArUco dictionary {value!r} (expected e.g. DICT_6X6_250)")
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Rig:
+        ids = [m.id for m in self.markers]
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        if dup:
+            raise ValueError(f"duplicate marker id {dup[0]} (each id may appear once)")
+        by_id = {m.id: m for m in self.markers}
+        names = [c.name for c in self.cameras]
+        dup_cam = sorted({n for n in names if names.count(n) > 1})
+        if dup_cam:
+            raise ValueError(f"duplicate camera name {dup_cam[0]!r}")
+        for i, pair in enumerate(self.pairs):
+            for role in ("jacket", "topside"):
+                mid = getattr(pair, role)
+                if mid not in by_id:
+                    raise ValueError(f"pairs[{i}].{role}: marker id {mid} is not in markers")
+                if by_id[mid].body != role:
+                    raise ValueError(f"pairs[{i}].{role}: marker {mid} is on the {by_id[mid].body}")
+            if pair.mated is not None:
+                derived = self._derived_mated(pair)
+                if np.max(np.abs(np.array(pair.mated) - derived)) > MATED_TOLERANCE_M:
+                    raise ValueError(
+                        f"pairs[{i}].mated: {pair.mated} disagrees with the marker centres "
+                        f"({derived.round(3).tolist()})")
+        return self
+
+    def _derived_mated(self, pair: Pair) -> np.ndarray:
+        by_id = self.marker_by_id
+        return np.array(by_id[pair.topside].center) - np.array(by_id[pair.jacket].center)
+
+    @property
+    def marker_by_id(self) -> dict[int, Marker]:
+        """Markers keyed by id."""
+        return {m.id: m for m in self.markers}
+
+    def all_pairs(self) -> list[Pair]:
+        """The listed pairs, or, if none are listed, every jacket/topside marker on the same cone and face."""
+        if self.pairs:
+            return list(self.pairs)
+        found = []
+        for j in (m for m in self.markers if m.body == "jacket"):
+            for s in (m for m in self.markers if m.body == "topside"):
+                if s.cone == j.cone and s.face == j.face:
+                    found.append(Pair(cone=j.cone, face=j.face, jacket=j.id, topside=s.id))
+        return found
+
+    def T_W_S_mated(self, pair: Pair) -> np.ndarray:
+        """(4, 4) nominal pose of the topside marker S in the jacket marker W's frame when mated."""
+        by_id = self.marker_by_id
+        T = np.linalg.inv(by_id[pair.jacket].T_body_marker) @ by_id[pair.topside].T_body_marker
+        if pair.mated is not None:
+            R_jacket_W = by_id[pair.jacket].T_body_marker[:3, :3]
+            T[:3, 3] = R_jacket_W.T @ np.array(pair.mated)
+        return T
+
+    def resolve(self, relative: str) -> Path:
+        """A path from the rig file, relative to the rig file's folder."""
+        p = Path(relative)
+        return p if p.is_absolute() else self.base_dir / p
+
+
+def _format_location(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def load_rig(path: str | Path) -> Rig:
+    """Read and validate a rig file; errors name the file and the field."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "rig file not found")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}" if mark else "YAML"
+        raise InputError(path, f"not valid YAML ({getattr(exc, 'problem', exc)})", where) from None
+    if not isinstance(data, dict):
+        raise InputError(path, "expected a mapping with dictionary, marker_size, markers, cameras")
+    try:
+        rig = Rig.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        msg = err["msg"].removeprefix("Value error, ")
+        loc = _format_location(err["loc"])
+        head, sep, rest = msg.partition(": ")
+        if sep and " " not in head:  # a cross-field check names its own field: "pairs[0].topside: ..."
+            loc, msg = ".".join(p for p in (loc, head) if p), rest
+        if err["type"] == "literal_error":
+            msg = f"got {err['input']!r}; {msg[0].lower()}{msg[1:]}"
+        raise InputError(path, msg, loc or None) from None
+    return rig.model_copy(update={"base_dir": path.parent})
+
+
+def save_rig(path: str | Path, rig: Rig) -> None:
+    """Write a rig file (the simulator and tests use it; people write theirs by hand)."""
+    data = rig.model_dump(mode="json", exclude_none=True)
+    Path(path).write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
