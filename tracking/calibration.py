@@ -1,0 +1,174 @@
+"""Camera calibration from chessboard or ChArUco photos (OpenCV's calibrateCamera)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tracking.camera import CameraModel
+from tracking.errors import InputError
+from tracking.images import read_gray
+
+MIN_VIEWS = 3
+MIN_CHARUCO_CORNERS = 6
+SUBPIX_WINDOW = (5, 5)  # as OpenCV's own calibration test
+SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.1)
+COVERAGE_GRID = 5  # the image is split into COVERAGE_GRID² cells to judge how much the board covered
+COVERAGE_WARN = 0.6  # warn below this share of cells holding a corner
+INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """A calibration board: chessboard (inner corners) or ChArUco (squares), sizes in metres."""
+
+    kind: str  # "chessboard" or "charuco"
+    cols: int  # chessboard: inner corners across; charuco: squares across
+    rows: int
+    square: float
+    marker: float = 0.0  # charuco only
+    dictionary: str = ""  # charuco only
+
+    def object_points(self) -> np.ndarray:
+        """(N, 3) chessboard inner corners in the board frame, row by row."""
+        grid = np.mgrid[0:self.cols, 0:self.rows].T.reshape(-1, 2)
+        return np.hstack([grid * self.square, np.zeros((len(grid), 1))]).astype(np.float32)
+
+    def charuco_board(self) -> cv2.aruco.CharucoBoard:
+        """The OpenCV ChArUco board object."""
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+        return cv2.aruco.CharucoBoard((self.cols, self.rows), self.square, self.marker, dictionary)
+
+
+BOARD_FORMS = "chessboard:COLSxROWS:SQUARE or charuco:COLSxROWS:SQUARE:MARKER:DICT"
+
+
+def parse_board(text: str) -> BoardSpec:
+    """Parse chessboard:9x6:0.025 or charuco:5x7:0.04:0.02:DICT_6X6_250."""
+    m = re.fullmatch(r"chessboard:(\d+)x(\d+):([0-9.]+)", text)
+    if m:
+        spec = BoardSpec("chessboard", int(m[1]), int(m[2]), float(m[3]))
+    else:
+        m = re.fullmatch(r"charuco:(\d+)x(\d+):([0-9.]+):([0-9.]+):(DICT_\w+)", text)
+        if not m:
+            raise InputError("--board", f"{text!r} is not a board (expected {BOARD_FORMS})")
+        if not hasattr(cv2.aruco, m[5]):
+            raise InputError("--board", f"unknown ArUco dictionary {m[5]!r} (expected e.g. DICT_6X6_250)")
+        spec = BoardSpec("charuco", int(m[1]), int(m[2]), float(m[3]), float(m[4]), m[5])
+        if spec.marker >= spec.square:
+            raise InputError("--board", f"marker {spec.marker} must be smaller than square {spec.square}")
+    if spec.cols < 2 or spec.rows < 2 or spec.square <= 0:
+        raise InputError("--board", f"{text!r}: need at least 2x2 and a positive square size")
+    return spec
+
+
+@dataclass
+class BoardView:
+    """Board corners found in one photo: image points (N, 2) and their board points (N, 3)."""
+
+    path: Path
+    image_points: np.ndarray
+    object_points: np.ndarray
+
+
+def find_chessboard(gray: np.ndarray, board: BoardSpec) -> tuple[np.ndarray, np.ndarray] | None:
+    """Chessboard inner corners refined to sub-pixel, or None when the board is not found."""
+    found, corners = cv2.findChessboardCorners(gray, (board.cols, board.rows))
+    if not found:
+        return None
+    corners = cv2.cornerSubPix(gray, corners, SUBPIX_WINDOW, (-1, -1), SUBPIX_CRITERIA)
+    return corners.reshape(-1, 2), board.object_points()
+
+
+def find_charuco(gray: np.ndarray, board: BoardSpec) -> tuple[np.ndarray, np.ndarray] | None:
+    """ChArUco corners (interpolated from the markers, sub-pixel), or None when too few are found."""
+    cboard = board.charuco_board()
+    detector = cv2.aruco.CharucoDetector(cboard)
+    corners, ids, _, _ = detector.detectBoard(gray)
+    if ids is None or len(ids) < MIN_CHARUCO_CORNERS:
+        return None
+    obj, img = cboard.matchImagePoints(corners, ids)
+    return img.reshape(-1, 2).astype(np.float32), obj.reshape(-1, 3).astype(np.float32)
+
+
+def find_board(path: Path, board: BoardSpec) -> tuple[BoardView | None, tuple[int, int]]:
+    """Board corners in one photo (None when not found) and the photo's size (w, h)."""
+    gray = read_gray(path)
+    finder = find_chessboard if board.kind == "chessboard" else find_charuco
+    found = finder(gray, board)
+    size = (gray.shape[1], gray.shape[0])
+    if found is None:
+        return None, size
+    return BoardView(path, found[0], found[1]), size
+
+
+@dataclass
+class CalibrationResult:
+    """What calibrateCamera found, with its uncertainty and the views it used."""
+
+    camera: CameraModel
+    rms: float  # px, over all points
+    per_view_rms: dict[str, float]  # photo name -> px
+    std_intrinsics: dict[str, float]  # fx, fy, cx, cy, k1, ... -> one standard deviation
+    missed: list[str] = field(default_factory=list)  # photos with no board
+    coverage: float = 1.0  # share of image cells that held a corner in some view
+    rvecs: list[np.ndarray] = field(default_factory=list)
+    tvecs: list[np.ndarray] = field(default_factory=list)
+
+
+def board_coverage(views: Sequence[BoardView], size: tuple[int, int]) -> float:
+    """Share of a COVERAGE_GRID² split of the image in which at least one board corner fell."""
+    hit = np.zeros((COVERAGE_GRID, COVERAGE_GRID), dtype=bool)
+    for view in views:
+        cells = (view.image_points / np.array(size) * COVERAGE_GRID).astype(int)
+        cells = np.clip(cells, 0, COVERAGE_GRID - 1)
+        hit[cells[:, 1], cells[:, 0]] = True
+    return float(hit.mean())
+
+
+def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
+              rational: bool = False, progress=None) -> CalibrationResult:
+    """Find the board in every photo and calibrate; refuses when fewer than MIN_VIEWS are usable."""
+    views: list[BoardView] = []
+    missed: list[str] = []
+    size: tuple[int, int] | None = None
+    for path in paths:
+        view, view_size = find_board(Path(path), board)
+        if size is None:
+            size = view_size
+        elif view_size != size:
+            raise InputError(path, f"image size {view_size[0]}x{view_size[1]} differs from the first photo's "
+                                   f"{size[0]}x{size[1]} (expected one camera)")
+        if view is None:
+            missed.append(Path(path).name)
+        else:
+            views.append(view)
+        if progress is not None:
+            progress()
+    if len(views) < MIN_VIEWS:
+        raise InputError(paths[0] if paths else "IMAGES",
+                         f"board found in {len(views)} of {len(paths)} photos; need at least {MIN_VIEWS} "
+                         f"usable views (board {board.kind} {board.cols}x{board.rows})")
+    assert size is not None
+    flags = 0
+    K0 = None
+    if fix_aspect:
+        flags |= cv2.CALIB_FIX_ASPECT_RATIO
+        K0 = np.eye(3)
+    if rational:
+        flags |= cv2.CALIB_RATIONAL_MODEL
+    rms, K, dist, rvecs, tvecs, std_intr, _std_extr, per_view = cv2.calibrateCameraExtended(
+        [v.object_points for v in views], [v.image_points for v in views], size, K0, None, flags=flags)
+    std = std_intr.reshape(-1)
+    std_named = {name: float(std[i]) for i, name in enumerate(INTRINSIC_NAMES[: 4 + dist.size])}
+    camera = CameraModel(K=K, dist=dist.reshape(-1), width=size[0], height=size[1], rms=float(rms))
+    return CalibrationResult(
+        camera=camera, rms=float(rms),
+        per_view_rms={v.path.name: float(e) for v, e in zip(views, per_view.reshape(-1), strict=True)},
+        std_intrinsics=std_named, missed=missed, coverage=board_coverage(views, size),
+        rvecs=list(rvecs), tvecs=list(tvecs))

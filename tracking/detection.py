@@ -1,0 +1,106 @@
+"""ArUco marker detection: ids and corners (TL, TR, BR, BL) in distorted pixel coordinates."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tracking.errors import InputError
+
+
+class Refinement(StrEnum):
+    """How marker corners are refined to sub-pixel accuracy."""
+
+    NONE = "none"
+    SUBPIX = "subpix"
+    CONTOUR = "contour"
+    APRILTAG = "apriltag"
+
+
+_CV_REFINE = {
+    Refinement.NONE: cv2.aruco.CORNER_REFINE_NONE,
+    Refinement.SUBPIX: cv2.aruco.CORNER_REFINE_SUBPIX,
+    Refinement.CONTOUR: cv2.aruco.CORNER_REFINE_CONTOUR,
+    Refinement.APRILTAG: cv2.aruco.CORNER_REFINE_APRILTAG,
+}
+DEFAULT_REFINEMENT = Refinement.SUBPIX
+SUBPIX_WIN = 3  # px half-window for CORNER_REFINE_SUBPIX; tuned in benchmarks/corners.py
+SUBPIX_MAX_ITER = 50
+SUBPIX_MIN_ACCURACY = 0.01  # px
+
+
+@dataclass(frozen=True)
+class MarkerDetection:
+    """One detected marker."""
+
+    id: int
+    corners: np.ndarray  # (4, 2) distorted pixels, TL TR BR BL
+
+
+@dataclass
+class Detections:
+    """All markers found in one frame."""
+
+    markers: list[MarkerDetection]
+    rejected: list[np.ndarray] = field(default_factory=list)  # (4, 2) candidates with no valid code
+
+    @property
+    def ids(self) -> list[int]:
+        """Ids found, in detection order."""
+        return [m.id for m in self.markers]
+
+
+def load_dictionary(name_or_path: str) -> cv2.aruco.Dictionary:
+    """A predefined dictionary (DICT_6X6_250) or a custom one from an OpenCV YAML file."""
+    if name_or_path.startswith("DICT_"):
+        if not hasattr(cv2.aruco, name_or_path):
+            raise InputError("--dictionary", f"unknown ArUco dictionary {name_or_path!r} "
+                                             "(expected e.g. DICT_6X6_250 or a dictionary YAML file)")
+        return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name_or_path))
+    path = Path(name_or_path)
+    if not path.is_file():
+        raise InputError(path, "dictionary file not found (expected e.g. DICT_6X6_250 or a YAML file)")
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    dictionary = cv2.aruco.Dictionary()
+    ok = fs.isOpened() and dictionary.readDictionary(fs.root())
+    fs.release()
+    if not ok or dictionary.bytesList is None or len(dictionary.bytesList) == 0:
+        raise InputError(path, "not an ArUco dictionary (expected nmarkers, markersize, marker_N)")
+    return dictionary
+
+
+def detector_parameters(refinement: Refinement = DEFAULT_REFINEMENT) -> cv2.aruco.DetectorParameters:
+    """OpenCV detector parameters with our corner refinement."""
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = _CV_REFINE[Refinement(refinement)]
+    params.cornerRefinementWinSize = SUBPIX_WIN
+    params.cornerRefinementMaxIterations = SUBPIX_MAX_ITER
+    params.cornerRefinementMinAccuracy = SUBPIX_MIN_ACCURACY
+    return params
+
+
+class MarkerDetector:
+    """Finds markers of one dictionary in grayscale frames."""
+
+    def __init__(self, dictionary: str | cv2.aruco.Dictionary = "DICT_6X6_250",
+                 refinement: Refinement = DEFAULT_REFINEMENT) -> None:
+        self.dictionary = load_dictionary(dictionary) if isinstance(dictionary, str) else dictionary
+        self.refinement = Refinement(refinement)
+        self._detector = cv2.aruco.ArucoDetector(self.dictionary, detector_parameters(self.refinement))
+
+    def detect(self, gray: np.ndarray, keep_rejected: bool = False) -> Detections:
+        """Markers in one grayscale (H, W) uint8 frame."""
+        if gray.ndim == 3:
+            gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
+        corners, ids, rejected = self._detector.detectMarkers(gray)
+        markers = []
+        if ids is not None:
+            for c, i in zip(corners, ids.reshape(-1), strict=True):
+                markers.append(MarkerDetection(id=int(i), corners=c.reshape(4, 2).astype(np.float64)))
+        markers.sort(key=lambda m: m.id)
+        kept = [r.reshape(4, 2).astype(np.float64) for r in rejected] if keep_rejected else []
+        return Detections(markers=markers, rejected=kept)

@@ -1,0 +1,83 @@
+"""The paper's relative offsets (eq. 12–16): the topside marker S in the jacket marker W, per camera."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tracking.pose import Choice, MarkerPose
+from tracking.rig import Pair, Rig
+
+MAX_PAIR_TILT_RAD = np.deg2rad(10.0)  # topside and jacket markers of a pair are never this far from parallel
+
+
+@dataclass(frozen=True)
+class PairOffset:
+    """One camera's measurement of one marker pair at one capture time."""
+
+    time: float  # capture time of the frame, s
+    camera: str
+    cone: str
+    face: str
+    jacket_id: int
+    topside_id: int
+    T_W_S: np.ndarray  # (4, 4) topside marker S in jacket marker W's frame (eq. 12)
+    offset: np.ndarray  # (3,) topside minus mated, jacket frame, m
+    choice: Choice  # how the IPPE ambiguity was settled (the weaker of the two markers)
+
+
+def relative_pose(T_camera_W: np.ndarray, T_camera_S: np.ndarray) -> np.ndarray:
+    """T_W_S (4, 4) = inv(T_camera_W) @ T_camera_S (eq. 13–16)."""
+    R_cw, t_cw = T_camera_W[:3, :3], T_camera_W[:3, 3]
+    T = np.eye(4)
+    T[:3, :3] = R_cw.T @ T_camera_S[:3, :3]
+    T[:3, 3] = R_cw.T @ T_camera_S[:3, 3] - R_cw.T @ t_cw
+    return T
+
+
+def _rotation_angle(R: np.ndarray) -> float:
+    return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def resolve_pair(W: MarkerPose, S: MarkerPose, T_W_S_mated: np.ndarray) -> tuple[MarkerPose, MarkerPose]:
+    """Settle IPPE ambiguities of a pair: the two markers are near parallel, so pick the combination that agrees."""
+    if W.choice == Choice.UNIQUE and S.choice == Choice.UNIQUE:
+        return W, S
+    best = None
+    for i in range(2):
+        for j in range(2):
+            rel = relative_pose(W.solutions[i].T_camera_marker, S.solutions[j].T_camera_marker)
+            tilt = _rotation_angle(T_W_S_mated[:3, :3].T @ rel[:3, :3])
+            cost = (tilt, W.solutions[i].reprojection_error + S.solutions[j].reprojection_error)
+            if best is None or cost < best[0]:
+                best = (cost, i, j)
+    assert best is not None
+    (tilt, _), i, j = best
+    if tilt > MAX_PAIR_TILT_RAD:
+        return W, S
+    W2 = W if W.choice == Choice.UNIQUE else W.with_choice(i, Choice.PAIR)
+    S2 = S if S.choice == Choice.UNIQUE else S.with_choice(j, Choice.PAIR)
+    return W2, S2
+
+
+def _weaker(a: Choice, b: Choice) -> Choice:
+    order = [Choice.UNIQUE, Choice.PAIR, Choice.AMBIGUOUS]
+    return max(a, b, key=order.index)
+
+
+def pair_offset(rig: Rig, pair: Pair, W: MarkerPose, S: MarkerPose, camera: str, time: float) -> PairOffset:
+    """The offset of one pair seen by one camera, in the jacket frame (topside minus mated)."""
+    T_W_S_mated = rig.T_W_S_mated(pair)
+    W, S = resolve_pair(W, S, T_W_S_mated)
+    T_W_S = relative_pose(W.T_camera_marker, S.T_camera_marker)
+    R_jacket_W = rig.marker_by_id[pair.jacket].T_body_marker[:3, :3]
+    offset = R_jacket_W @ (T_W_S[:3, 3] - T_W_S_mated[:3, 3])
+    return PairOffset(time=time, camera=camera, cone=pair.cone, face=pair.face, jacket_id=pair.jacket,
+                      topside_id=pair.topside, T_W_S=T_W_S, offset=offset, choice=_weaker(W.choice, S.choice))
+
+
+def frame_offsets(rig: Rig, poses: dict[int, MarkerPose], camera: str, time: float) -> list[PairOffset]:
+    """Offsets of every rig pair whose two markers are both among the poses of one frame."""
+    return [pair_offset(rig, p, poses[p.jacket], poses[p.topside], camera, time)
+            for p in rig.all_pairs() if p.jacket in poses and p.topside in poses]

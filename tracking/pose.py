@@ -1,0 +1,90 @@
+"""Marker poses by IPPE_SQUARE on undistorted corners, keeping both solutions of the planar ambiguity."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+import cv2
+import numpy as np
+
+from tracking.camera import CameraModel
+from tracking.detection import MarkerDetection
+
+AMBIGUITY_RATIO = 1.5  # a pose counts as unambiguous when the other IPPE solution reprojects this much worse
+
+
+class Choice(StrEnum):
+    """How the pose among the two IPPE solutions was chosen."""
+
+    UNIQUE = "unique"  # the other solution reprojects clearly worse (ratio >= AMBIGUITY_RATIO)
+    PAIR = "pair"  # ambiguous alone; chosen by agreement with the other marker of its pair
+    AMBIGUOUS = "ambiguous"  # ambiguous and nothing else decided it; the lower reprojection error was kept
+
+
+def marker_object_points(size: float) -> np.ndarray:
+    """(4, 3) marker corners TL TR BR BL in the marker frame (x right, y up, z out of the face)."""
+    h = size / 2.0
+    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+
+
+def rt_to_T(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
+    """Rotation vector (3,) and translation (3,) to a (4, 4) transform."""
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3))[0]
+    T[:3, 3] = np.asarray(tvec, dtype=np.float64).reshape(3)
+    return T
+
+
+@dataclass(frozen=True)
+class PoseSolution:
+    """One IPPE solution: T_camera_marker and its RMS reprojection error in px."""
+
+    T_camera_marker: np.ndarray  # (4, 4)
+    reprojection_error: float
+
+
+@dataclass(frozen=True)
+class MarkerPose:
+    """Pose of one marker in one camera, with the rejected alternative kept for the record."""
+
+    id: int
+    corners: np.ndarray  # (4, 2) distorted pixels as detected
+    solutions: tuple[PoseSolution, PoseSolution]  # sorted by reprojection error
+    chosen: int  # index into solutions
+    choice: Choice
+
+    @property
+    def T_camera_marker(self) -> np.ndarray:
+        """(4, 4) chosen pose: marker coordinates to camera coordinates."""
+        return self.solutions[self.chosen].T_camera_marker
+
+    @property
+    def reprojection_error(self) -> float:
+        """RMS reprojection error of the chosen solution, px."""
+        return self.solutions[self.chosen].reprojection_error
+
+    @property
+    def ambiguity(self) -> float:
+        """Reprojection error of the worse solution over the better one (large = unambiguous)."""
+        e0, e1 = (s.reprojection_error for s in self.solutions)
+        return float(e1 / max(e0, 1e-9))
+
+    def with_choice(self, chosen: int, choice: Choice) -> MarkerPose:
+        """The same pose with another solution chosen."""
+        return MarkerPose(self.id, self.corners, self.solutions, chosen, choice)
+
+
+def estimate_pose(detection: MarkerDetection, camera: CameraModel, marker_size: float) -> MarkerPose:
+    """Both IPPE_SQUARE solutions for one marker, from its undistorted corners."""
+    ideal = camera.undistort_points(detection.corners)
+    _, rvecs, tvecs, errors = cv2.solvePnPGeneric(
+        marker_object_points(marker_size), ideal.reshape(-1, 1, 2), camera.K, None,
+        flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    sols = [PoseSolution(rt_to_T(r, t), float(e)) for r, t, e in
+            zip(rvecs, tvecs, np.asarray(errors).reshape(-1), strict=True)]
+    if len(sols) == 1:
+        sols.append(sols[0])
+    sols.sort(key=lambda s: s.reprojection_error)
+    pose = MarkerPose(detection.id, detection.corners, (sols[0], sols[1]), 0, Choice.UNIQUE)
+    return pose if pose.ambiguity >= AMBIGUITY_RATIO else pose.with_choice(0, Choice.AMBIGUOUS)
