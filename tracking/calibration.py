@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -16,7 +16,7 @@ from tracking.images import read_gray
 
 MIN_VIEWS = 3
 MIN_CHARUCO_CORNERS = 6
-SUBPIX_WINDOW = (5, 5)  # as OpenCV's own calibration test
+SUBPIX_WINDOW = 5  # half-size, px, as OpenCV's own calibration test; its calibration.cpp sample uses 11
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.1)
 COVERAGE_GRID = 5  # the image is split into COVERAGE_GRID² cells to judge how much the board covered
 COVERAGE_WARN = 0.6  # warn below this share of cells holding a corner
@@ -76,16 +76,18 @@ class BoardView:
     object_points: np.ndarray
 
 
-def find_chessboard(gray: np.ndarray, board: BoardSpec) -> tuple[np.ndarray, np.ndarray] | None:
+def find_chessboard(gray: np.ndarray, board: BoardSpec, window: int = SUBPIX_WINDOW
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
     """Chessboard inner corners refined to sub-pixel, or None when the board is not found."""
     found, corners = cv2.findChessboardCorners(gray, (board.cols, board.rows))
     if not found:
         return None
-    corners = cv2.cornerSubPix(gray, corners, SUBPIX_WINDOW, (-1, -1), SUBPIX_CRITERIA)
+    corners = cv2.cornerSubPix(gray, corners, (window, window), (-1, -1), SUBPIX_CRITERIA)
     return corners.reshape(-1, 2), board.object_points()
 
 
-def find_charuco(gray: np.ndarray, board: BoardSpec) -> tuple[np.ndarray, np.ndarray] | None:
+def find_charuco(gray: np.ndarray, board: BoardSpec, window: int = SUBPIX_WINDOW
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
     """ChArUco corners (interpolated from the markers, sub-pixel), or None when too few are found."""
     cboard = board.charuco_board()
     detector = cv2.aruco.CharucoDetector(cboard)
@@ -96,11 +98,12 @@ def find_charuco(gray: np.ndarray, board: BoardSpec) -> tuple[np.ndarray, np.nda
     return img.reshape(-1, 2).astype(np.float32), obj.reshape(-1, 3).astype(np.float32)
 
 
-def find_board(path: Path, board: BoardSpec) -> tuple[BoardView | None, tuple[int, int]]:
+def find_board(path: Path, board: BoardSpec, window: int = SUBPIX_WINDOW
+               ) -> tuple[BoardView | None, tuple[int, int]]:
     """Board corners in one photo (None when not found) and the photo's size (w, h)."""
     gray = read_gray(path)
     finder = find_chessboard if board.kind == "chessboard" else find_charuco
-    found = finder(gray, board)
+    found = finder(gray, board, window)
     size = (gray.shape[1], gray.shape[0])
     if found is None:
         return None, size
@@ -117,6 +120,7 @@ class CalibrationResult:
     std_intrinsics: dict[str, float]  # fx, fy, cx, cy, k1, ... -> one standard deviation
     missed: list[str] = field(default_factory=list)  # photos with no board
     coverage: float = 1.0  # share of image cells that held a corner in some view
+    flags: int = 0  # cv2.CALIB_* flags used
     rvecs: list[np.ndarray] = field(default_factory=list)
     tvecs: list[np.ndarray] = field(default_factory=list)
 
@@ -132,13 +136,14 @@ def board_coverage(views: Sequence[BoardView], size: tuple[int, int]) -> float:
 
 
 def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
-              rational: bool = False, progress=None) -> CalibrationResult:
+              rational: bool = False, subpix_window: int = SUBPIX_WINDOW,
+              progress: Callable[[], None] | None = None) -> CalibrationResult:
     """Find the board in every photo and calibrate; refuses when fewer than MIN_VIEWS are usable."""
     views: list[BoardView] = []
     missed: list[str] = []
     size: tuple[int, int] | None = None
     for path in paths:
-        view, view_size = find_board(Path(path), board)
+        view, view_size = find_board(Path(path), board, subpix_window)
         if size is None:
             size = view_size
         elif view_size != size:
@@ -170,5 +175,5 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
     return CalibrationResult(
         camera=camera, rms=float(rms),
         per_view_rms={v.path.name: float(e) for v, e in zip(views, per_view.reshape(-1), strict=True)},
-        std_intrinsics=std_named, missed=missed, coverage=board_coverage(views, size),
+        std_intrinsics=std_named, missed=missed, coverage=board_coverage(views, size), flags=flags,
         rvecs=list(rvecs), tvecs=list(tvecs))

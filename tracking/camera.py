@@ -16,6 +16,7 @@ import numpy as np
 from tracking.errors import InputError
 
 DISTORTION_SIZES = (4, 5, 8, 12, 14)
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
 
 
 @dataclass(frozen=True)
@@ -37,10 +38,7 @@ class CameraModel:
     def undistort_points(self, pixels: np.ndarray) -> np.ndarray:
         """Distorted pixels (N, 2) to ideal pixels (N, 2) of the same K with no distortion."""
         pts = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
-        out = cv2.undistortPointsIter(
-            pts, self.K, self.dist, None, self.K,
-            (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9),
-        )
+        out = cv2.undistortPoints(pts, self.K, self.dist, P=self.K, criteria=UNDISTORT_CRITERIA)
         return out.reshape(-1, 2)
 
     def project(self, points_cam: np.ndarray) -> np.ndarray:

@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import sys
+from collections import Counter
 from pathlib import Path
 from typing import Annotated
 
+import cv2
+import numpy as np
 import typer
 from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
+from tracking.detection import Refinement
 from tracking.errors import EXIT_BAD_INPUT, InputError
 
 app = typer.Typer(
@@ -19,6 +24,170 @@ app = typer.Typer(
     add_completion=False,
 )
 err_console = Console(stderr=True, highlight=False, soft_wrap=True)
+console = Console(highlight=False)
+
+
+def _progress() -> Progress:
+    return Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                    TimeElapsedColumn(), console=err_console, transient=True)
+
+
+@app.command()
+def calibrate(
+    images: Annotated[list[Path], typer.Argument(help="Photos of the board, one camera, several views.")],
+    board: Annotated[str, typer.Option(help="chessboard:COLSxROWS:SQUARE (inner corners, m) or "
+                                            "charuco:COLSxROWS:SQUARE:MARKER:DICT (squares, m).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Camera file to write (OpenCV YAML).")],
+    fix_aspect: Annotated[bool, typer.Option("--fix-aspect", help="Keep fx = fy (CALIB_FIX_ASPECT_RATIO).")] = False,
+    rational: Annotated[bool, typer.Option("--rational", help="8-coefficient rational distortion model.")] = False,
+    subpix_window: Annotated[int, typer.Option(help="Half-size of cornerSubPix's window, px (chessboard).")] = 5,
+) -> None:
+    """Calibrate one camera from photos of a chessboard or ChArUco board."""
+    from rich.table import Table
+
+    import tracking.calibration as calib
+    from tracking.camera import save_camera
+
+    spec = calib.parse_board(board)
+    with _progress() as progress:
+        task = progress.add_task("finding the board", total=len(images))
+        result = calib.calibrate(images, spec, fix_aspect=fix_aspect, rational=rational,
+                                 subpix_window=subpix_window, progress=lambda: progress.advance(task))
+    table = Table(title="per-view reprojection error")
+    table.add_column("view")
+    table.add_column("RMS [px]", justify="right")
+    for name, err in result.per_view_rms.items():
+        table.add_row(name, f"{err:.4f}")
+    console.print(table)
+    K, d = result.camera.K, result.camera.dist
+    std = result.std_intrinsics
+    console.print(f"views used: {len(result.per_view_rms)} of {len(images)}")
+    console.print(f"total RMS reprojection error: {result.rms:.4f} px")
+    values = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}
+    values.update({n: d[i] for i, n in enumerate(calib.INTRINSIC_NAMES[4:4 + d.size])})
+    for name, value in values.items():
+        console.print(f"  {name:>3} = {value:12.6f} ± {std.get(name, float('nan')):.6f}")
+    if result.missed:
+        console.print(f"[yellow]no board found in {len(result.missed)}: {', '.join(result.missed)}[/yellow]")
+    if result.coverage < calib.COVERAGE_WARN:
+        console.print(f"[yellow]warning: the board covered only {result.coverage:.0%} of the image "
+                      "(corners and edges unseen); distortion is poorly determined there[/yellow]")
+    save_camera(out, result.camera, extra={"nframes": len(result.per_view_rms), "flags": result.flags})
+    console.print(f"wrote {out}")
+
+
+@app.command()
+def detect(
+    source: Annotated[Path, typer.Argument(help="An image or a video.")],
+    dictionary: Annotated[str | None, typer.Option(help="DICT_6X6_250 (default) or a dictionary YAML.")] = None,
+    rig: Annotated[Path | None, typer.Option(help="Rig file: its dictionary, marker size and ids.")] = None,
+    camera: Annotated[Path | None, typer.Option(help="Camera file: also estimate every marker's pose.")] = None,
+    marker_size: Annotated[float | None, typer.Option(help="Marker edge in m (default: the rig's, or 1.0).")] = None,
+    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = Refinement.SUBPIX,
+    as_json: Annotated[bool, typer.Option("--json", help="One JSON object per frame.")] = False,
+) -> None:
+    """Print the markers found in every frame: ids, corners (TL TR BR BL) and, given a camera, poses."""
+    import json
+
+    from tracking.camera import load_camera
+    from tracking.detection import MarkerDetector
+    from tracking.images import frames, is_image
+    from tracking.pose import estimate_pose
+    from tracking.rig import load_rig
+
+    the_rig = load_rig(rig) if rig else None
+    if dictionary and the_rig and dictionary != the_rig.dictionary:
+        raise InputError("--dictionary", f"{dictionary} differs from the rig's {the_rig.dictionary}")
+    detector = MarkerDetector(dictionary or (the_rig.dictionary if the_rig else "DICT_6X6_250"), refine)
+    cam = load_camera(camera) if camera else None
+    size = marker_size or (the_rig.marker_size if the_rig else 1.0)
+    known = the_rig.marker_by_id if the_rig else None
+    unknown: Counter[int] = Counter()
+    n_frames = 0
+    for frame in frames(source):
+        n_frames += 1
+        det = detector.detect(frame.gray)
+        if cam is not None and (frame.gray.shape[1], frame.gray.shape[0]) != cam.image_size:
+            raise InputError(camera, f"is for {cam.width}x{cam.height} but {source} is "
+                             f"{frame.gray.shape[1]}x{frame.gray.shape[0]}", "image_width/image_height")
+        markers = []
+        for m in det.markers:
+            if known is not None and m.id not in known:
+                unknown[m.id] += 1
+                if is_image(source):
+                    raise InputError(source, f"marker id {m.id} is not in the rig {rig}", "id")
+                continue
+            entry: dict = {"id": m.id, "corners": np.round(m.corners, 3).tolist()}
+            if cam is not None:
+                pose = estimate_pose(m, cam, size)
+                entry["pose"] = {
+                    "tvec": np.round(pose.T_camera_marker[:3, 3], 4).tolist(),
+                    "rvec": np.round(cv2.Rodrigues(pose.T_camera_marker[:3, :3])[0].reshape(3), 5).tolist(),
+                    "reprojection_error": round(pose.reprojection_error, 4),
+                    "alternative_error": round(pose.solutions[1].reprojection_error, 4),
+                    "choice": str(pose.choice),
+                }
+            markers.append(entry)
+        if as_json:
+            print(json.dumps({"frame": frame.index, "time": round(frame.time, 6), "markers": markers}))
+            continue
+        console.print(f"frame {frame.index}  t={frame.time:.3f}s  {len(markers)} markers")
+        for e in markers:
+            corners = " ".join(f"({x:.2f},{y:.2f})" for x, y in e["corners"])
+            console.print(f"  id {e['id']:>4}  {corners}")
+            if "pose" in e:
+                p = e["pose"]
+                console.print(f"         t={p['tvec']} m  r={p['rvec']}  reproj {p['reprojection_error']:.3f}px "
+                              f"(other {p['alternative_error']:.3f}px, {p['choice']})")
+    if unknown:
+        summary = ", ".join(f"id {i}: {n}" for i, n in sorted(unknown.items()))
+        err_console.print(f"{n_frames} frames; markers not in the rig ignored: {summary}")
+
+
+@app.command()
+def track(
+    rig: Annotated[Path, typer.Option(help="Rig file of the installation.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Offsets CSV to write.")] = Path("offsets.csv"),
+    mode: Annotated[str, typer.Option(help="raw: every camera's pair offset; paper: the paper's method.")] = "raw",
+    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = Refinement.SUBPIX,
+) -> None:
+    """Track the rig's videos and write the offset at each cone per timestamp (CSV)."""
+    from rich.table import Table
+
+    from tracking.filtering import paper_filter, raw_estimates
+    from tracking.pipeline import TrackStats, source_frame_count, track_rig
+    from tracking.report import write_offsets_csv
+    from tracking.rig import load_rig
+
+    if mode not in ("raw", "paper"):
+        raise InputError("--mode", f"{mode!r} is not a mode (expected raw or paper)")
+    the_rig = load_rig(rig)
+    stats = TrackStats()
+    totals = [source_frame_count(the_rig.resolve(c.source)) for c in the_rig.cameras]
+    total = sum(t for t in totals if t) or None
+    with _progress() as progress:
+        task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras", total=total)
+
+        def measurements():
+            for result in track_rig(the_rig, refine):
+                stats.add(result)
+                progress.advance(task)
+                yield from result.offsets
+
+        estimates = paper_filter(the_rig, measurements()) if mode == "paper" else raw_estimates(measurements())
+        n_rows = write_offsets_csv(out, estimates)
+    table = Table(title=f"tracked {rig} ({mode} mode)")
+    for col in ("camera", "frames", "markers", "pair offsets", "ambiguous"):
+        table.add_column(col, justify="right" if col != "camera" else "left")
+    for cam in the_rig.cameras:
+        n = cam.name
+        table.add_row(n, str(stats.frames[n]), str(stats.markers[n]), str(stats.pair_offsets[n]),
+                      str(stats.ambiguous[n]))
+    console.print(table)
+    if stats.unknown_ids:
+        summary = ", ".join(f"id {i}: {n}" for i, n in sorted(stats.unknown_ids.items()))
+        console.print(f"[yellow]markers not in the rig (ignored): {summary}[/yellow]")
+    console.print(f"wrote {n_rows} rows to {out}")
 
 
 @app.command()

@@ -119,7 +119,12 @@ class Rig(_Model):
     markers: list[Marker]
     pairs: list[Pair] = Field(default_factory=list)
     cameras: list[CameraEntry] = Field(default_factory=list)
-    base_dir: Path = Field(default=Path("."), exclude=True)
+    path: Path = Field(default=Path("rig.yaml"), exclude=True)  # the file it was read from
+
+    @property
+    def base_dir(self) -> Path:
+        """Folder that relative paths in the rig are resolved against."""
+        return self.path.parent
 
     @field_validator("dictionary")
     @classmethod
@@ -221,7 +226,7 @@ def load_rig(path: str | Path) -> Rig:
         if err["type"] == "literal_error":
             msg = f"got {err['input']!r}; {msg[0].lower()}{msg[1:]}"
         raise InputError(path, msg, loc or None) from None
-    return rig.model_copy(update={"base_dir": path.parent})
+    return rig.model_copy(update={"path": path})
 
 
 def save_rig(path: str | Path, rig: Rig) -> None:

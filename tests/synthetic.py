@@ -1,0 +1,112 @@
+"""A small, exact marker renderer for tests: supersampled, with lens distortion, known poses.
+
+Independent of the tracker and of the simulator. Pixel centres are at integer coordinates
+(OpenCV's convention); each pixel averages SUPERSAMPLE² sub-samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+SUPERSAMPLE = 8
+BACKGROUND = 90
+WHITE = 235
+BLACK = 20
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-12)
+
+
+@dataclass(frozen=True)
+class PlacedMarker:
+    """A marker with its pose in the camera frame."""
+
+    id: int
+    T_camera_marker: np.ndarray  # (4, 4)
+    size: float  # black square edge, m
+
+
+def marker_cells(dictionary: int, marker_id: int) -> np.ndarray:
+    """(n+4, n+4) float cells in [0, 1]: one white quiet-zone cell, black border, code bits."""
+    d = cv2.aruco.getPredefinedDictionary(dictionary)
+    n = d.markerSize
+    img = cv2.aruco.generateImageMarker(d, marker_id, n + 2, borderBits=1)
+    return np.pad(img.astype(np.float64) / 255.0, 1, constant_values=1.0)
+
+
+def true_corners(K: np.ndarray, dist: np.ndarray, m: PlacedMarker) -> np.ndarray:
+    """(4, 2) distorted pixel positions of the corners TL TR BR BL."""
+    h = m.size / 2
+    obj = np.array([[-h, h, 0], [h, h, 0], [h, -h, 0], [-h, -h, 0]], dtype=np.float64)
+    R, t = m.T_camera_marker[:3, :3], m.T_camera_marker[:3, 3]
+    px, _ = cv2.projectPoints(obj, cv2.Rodrigues(R)[0], t, K, dist)
+    return px.reshape(4, 2)
+
+
+def render(K: np.ndarray, dist: np.ndarray, size: tuple[int, int], markers: list[PlacedMarker],
+           dictionary: int = cv2.aruco.DICT_6X6_250, noise: float = 0.0, blur: float = 0.0,
+           seed: int = 0, ss: int = SUPERSAMPLE) -> np.ndarray:
+    """Grayscale (H, W) uint8 image of the markers on a plain background (markers must not overlap)."""
+    w, h = size
+    image = np.full((h, w), float(BACKGROUND))
+    for m in sorted(markers, key=lambda m: -m.T_camera_marker[2, 3]):
+        cells = marker_cells(dictionary, m.id)
+        ncell = cells.shape[0]
+        plate = m.size * ncell / (ncell - 2)  # marker plus one quiet-zone cell each side
+        corners = true_corners(K, dist, PlacedMarker(m.id, m.T_camera_marker, plate))
+        x0, y0 = np.floor(corners.min(axis=0)).astype(int) - 2
+        x1, y1 = np.ceil(corners.max(axis=0)).astype(int) + 3
+        x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+        if x1 <= x0 or y1 <= y0:
+            continue
+        offs = (np.arange(ss) + 0.5) / ss - 0.5
+        us = (np.arange(x0, x1)[:, None] + offs[None, :]).reshape(-1)
+        vs = (np.arange(y0, y1)[:, None] + offs[None, :]).reshape(-1)
+        U, V = np.meshgrid(us, vs)
+        pts = np.stack([U.ravel(), V.ravel()], axis=1).reshape(-1, 1, 2)
+        ideal = cv2.undistortPoints(pts, K, dist, criteria=UNDISTORT_CRITERIA).reshape(-1, 2)
+        # ray (x, y, 1) meets the marker plane z_m = 0: solve with the plane in camera coordinates
+        R, t = m.T_camera_marker[:3, :3], m.T_camera_marker[:3, 3]
+        rays = np.hstack([ideal, np.ones((len(ideal), 1))])
+        n = R[:, 2]
+        s = (n @ t) / (rays @ n)
+        P = rays * s[:, None] - t
+        local = P @ R  # marker-frame coordinates
+        gx = (local[:, 0] / plate + 0.5) * ncell
+        gy = (0.5 - local[:, 1] / plate) * ncell
+        inside = (gx >= 0) & (gx < ncell) & (gy >= 0) & (gy < ncell) & (s > 0)
+        value = np.full(len(gx), np.nan)
+        gi = np.clip(gx.astype(int), 0, ncell - 1)
+        gj = np.clip(gy.astype(int), 0, ncell - 1)
+        value[inside] = BLACK + (WHITE - BLACK) * cells[gj[inside], gi[inside]]
+        value = value.reshape(y1 - y0, ss, x1 - x0, ss)
+        region = image[y0:y1, x0:x1]
+        cover = np.isfinite(value)
+        filled = np.where(cover, value, region[:, None, :, None])
+        image[y0:y1, x0:x1] = filled.mean(axis=(1, 3))
+    if blur > 0:
+        image = cv2.GaussianBlur(image, (0, 0), blur)
+    if noise > 0:
+        image = image + np.random.default_rng(seed).normal(0, noise, image.shape)
+    return np.clip(np.round(image), 0, 255).astype(np.uint8)
+
+
+UP = np.array([0.0, 0.0, 1.0])
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = UP) -> np.ndarray:
+    """T_world_camera (4, 4) of an OpenCV camera (x right, y down, z forward) at eye looking at target."""
+    z = target - eye
+    z = z / np.linalg.norm(z)
+    x = np.cross(z, up)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, y, z])
+    T[:3, 3] = eye
+    return T
+
+
+PAPER_K = np.array([[1258.27, 0.0, 468.746], [0.0, 1259.0, 296.561], [0.0, 0.0, 1.0]])
+PAPER_SIZE = (920, 600)

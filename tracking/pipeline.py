@@ -1,0 +1,118 @@
+"""The tracking pipeline: frames -> detections -> poses -> pair offsets, per camera, merged by capture time."""
+
+from __future__ import annotations
+
+import heapq
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from tracking.camera import CameraModel, load_camera
+from tracking.detection import Detections, MarkerDetector, Refinement
+from tracking.errors import InputError
+from tracking.images import Frame, frames
+from tracking.offsets import PairOffset, frame_offsets
+from tracking.pose import Choice, MarkerPose, estimate_pose
+from tracking.rig import CameraEntry, Rig
+
+
+@dataclass
+class FrameResult:
+    """Everything the tracker found in one frame of one camera."""
+
+    camera: str
+    frame: Frame
+    detections: Detections
+    poses: dict[int, MarkerPose]  # rig markers only, by id
+    offsets: list[PairOffset]
+    unknown_ids: list[int]  # detected ids that the rig does not list
+
+    @property
+    def time(self) -> float:
+        """Capture time, s."""
+        return self.frame.time
+
+
+@dataclass
+class TrackStats:
+    """Counts for the run summary, per camera."""
+
+    frames: Counter = field(default_factory=Counter)
+    markers: Counter = field(default_factory=Counter)
+    pair_offsets: Counter = field(default_factory=Counter)
+    ambiguous: Counter = field(default_factory=Counter)
+    unknown_ids: Counter = field(default_factory=Counter)  # id -> detections
+
+    def add(self, r: FrameResult) -> None:
+        """Count one frame's results."""
+        self.frames[r.camera] += 1
+        self.markers[r.camera] += len(r.poses)
+        self.pair_offsets[r.camera] += len(r.offsets)
+        self.ambiguous[r.camera] += sum(o.choice == Choice.AMBIGUOUS for o in r.offsets)
+        self.unknown_ids.update(r.unknown_ids)
+
+
+@dataclass
+class CameraTracker:
+    """Detection and poses for one camera of a rig."""
+
+    rig: Rig
+    entry: CameraEntry
+    camera: CameraModel
+    detector: MarkerDetector
+    keep_color: bool = False
+
+    @classmethod
+    def from_rig(cls, rig: Rig, entry: CameraEntry, refinement: Refinement, keep_color: bool = False
+                 ) -> CameraTracker:
+        """Load the camera's calibration and build its detector."""
+        return cls(rig, entry, load_camera(rig.resolve(entry.calibration)),
+                   MarkerDetector(rig.dictionary, refinement), keep_color)
+
+    def process(self, frame: Frame) -> FrameResult:
+        """Detect, estimate poses and the pair offsets of one frame."""
+        if (frame.gray.shape[1], frame.gray.shape[0]) != self.camera.image_size:
+            raise InputError(self.entry.source, f"frame is {frame.gray.shape[1]}x{frame.gray.shape[0]} but the "
+                             f"calibration is for {self.camera.width}x{self.camera.height}", "image size")
+        detections = self.detector.detect(frame.gray, keep_rejected=self.keep_color)
+        known = self.rig.marker_by_id
+        poses = {d.id: estimate_pose(d, self.camera, self.rig.marker_size) for d in detections.markers
+                 if d.id in known}
+        unknown = [d.id for d in detections.markers if d.id not in known]
+        offsets = frame_offsets(self.rig, poses, self.entry.name, frame.time)
+        return FrameResult(self.entry.name, frame, detections, poses, offsets, unknown)
+
+    def run(self) -> Iterator[FrameResult]:
+        """Every frame of the camera's source, processed."""
+        source = self.entry.source
+        path = self.rig.resolve(source)
+        src = path if path.exists() or not source.startswith(("rtsp:", "http:", "https:")) else source
+        for frame in frames(src, self.entry.time_offset, keep_color=self.keep_color):
+            yield self.process(frame)
+
+
+def track_rig(rig: Rig, refinement: Refinement = Refinement.SUBPIX, cameras: list[str] | None = None,
+              keep_color: bool = False, on_frame: Callable[[FrameResult], None] | None = None
+              ) -> Iterator[FrameResult]:
+    """All cameras of a rig, merged into one stream ordered by capture time."""
+    entries = [c for c in rig.cameras if cameras is None or c.name in cameras]
+    if not entries:
+        raise InputError(rig.path, "no cameras to track (expected at least one)", "cameras")
+    trackers = [CameraTracker.from_rig(rig, e, refinement, keep_color) for e in entries]
+    for result in heapq.merge(*(t.run() for t in trackers), key=lambda r: r.time):
+        if on_frame is not None:
+            on_frame(result)
+        yield result
+
+
+def source_frame_count(path: Path) -> int | None:
+    """Number of frames a video declares, for progress bars (None when unknown)."""
+    import av
+
+    try:
+        with av.open(str(path)) as c:
+            n = c.streams.video[0].frames
+            return int(n) if n else None
+    except Exception:
+        return None
