@@ -51,6 +51,8 @@ def render(K: np.ndarray, dist: np.ndarray, size: tuple[int, int], markers: list
     w, h = size
     image = np.full((h, w), float(BACKGROUND))
     for m in sorted(markers, key=lambda m: -m.T_camera_marker[2, 3]):
+        if m.T_camera_marker[:3, 2] @ m.T_camera_marker[:3, 3] >= 0:
+            continue  # seen from behind
         cells = marker_cells(dictionary, m.id)
         ncell = cells.shape[0]
         plate = m.size * ncell / (ncell - 2)  # marker plus one quiet-zone cell each side
@@ -110,3 +112,80 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = UP) -> np.ndar
 
 PAPER_K = np.array([[1258.27, 0.0, 468.746], [0.0, 1259.0, 296.561], [0.0, 0.0, 1.0]])
 PAPER_SIZE = (920, 600)
+
+
+# --- a small installation on disk: cone A, two faces, two cameras, H.264 videos -------------------------
+
+CONE_A = np.array([-12.0, -12.0, 0.0])
+MATED_RISE = 1.8  # topside marker centre above the jacket marker centre when mated, m
+JACKET_MARKER_Z = -1.5
+FACES = {"ahead": (1, 2), "port": (3, 4)}  # face -> (jacket id, topside id)
+
+
+def marker_centres() -> dict[int, tuple[str, str, np.ndarray]]:
+    """id -> (body, face, centre in its body frame)."""
+    out = {}
+    for face, (jid, sid) in FACES.items():
+        normal = {"ahead": np.array([0.0, -1.0, 0.0]), "port": np.array([1.0, 0.0, 0.0])}[face]
+        base = CONE_A + 0.8 * normal + np.array([0.0, 0.0, JACKET_MARKER_Z])
+        out[jid] = ("jacket", face, base)
+        out[sid] = ("topside", face, base + np.array([0.0, 0.0, MATED_RISE]))
+    return out
+
+
+def rig_dict(cameras: list[dict]) -> dict:
+    """The rig file content of the small installation."""
+    markers = [{"id": i, "body": b, "cone": "A", "face": f, "center": c.round(6).tolist()}
+               for i, (b, f, c) in marker_centres().items()]
+    pairs = [{"cone": "A", "face": f, "jacket": j, "topside": s, "mated": [0.0, 0.0, MATED_RISE]}
+             for f, (j, s) in FACES.items()]
+    return {"name": "synthetic", "dictionary": "DICT_6X6_250", "marker_size": 1.0,
+            "cones": {"A": CONE_A.tolist()}, "markers": markers, "pairs": pairs, "cameras": cameras}
+
+
+def face_T(face: str) -> np.ndarray:
+    """R_body_marker of a face as the rig defines it (computed here independently)."""
+    z = {"ahead": np.array([0.0, -1.0, 0.0]), "port": np.array([1.0, 0.0, 0.0])}[face]
+    y = np.array([0.0, 0.0, 1.0])
+    return np.column_stack([np.cross(y, z), y, z])
+
+
+CAMERA_EYES = {"cam-ahead": np.array([-9.0, -32.0, 4.0]), "cam-port": np.array([8.0, -8.0, 3.0])}
+
+
+def render_installation(folder, offsets: np.ndarray, times: dict[str, np.ndarray], dist: np.ndarray,
+                        noise: float = 1.0) -> None:
+    """Write rig.yaml, calibration/*.yaml and one H.264 video per camera; offsets (N, 3) per frame index."""
+    import av
+    import yaml
+
+    from tracking.camera import CameraModel, save_camera
+
+    folder.mkdir(parents=True, exist_ok=True)
+    cams = []
+    centres = marker_centres()
+    for name, eye in CAMERA_EYES.items():
+        T_jacket_cam = look_at(eye, CONE_A + np.array([0.0, 0.0, JACKET_MARKER_Z + MATED_RISE / 2]))
+        save_camera(folder / f"calibration/{name}.yaml", CameraModel(PAPER_K, dist, *PAPER_SIZE))
+        cams.append({"name": name, "calibration": f"calibration/{name}.yaml", "source": f"{name}.mp4",
+                     "time_offset": float(times[name][0])})
+        with av.open(str(folder / f"{name}.mp4"), "w") as out:
+            stream = out.add_stream("libx264", rate=30)
+            stream.width, stream.height = PAPER_SIZE
+            stream.pix_fmt = "yuv420p"
+            stream.options = {"crf": "12", "preset": "ultrafast"}
+            stream.codec_context.time_base = __import__("fractions").Fraction(1, 1000)
+            for k, t in enumerate(times[name]):
+                placed = []
+                for mid, (body, face, c) in centres.items():
+                    T_body_m = np.eye(4)
+                    T_body_m[:3, :3] = face_T(face)
+                    T_body_m[:3, 3] = c + (offsets[k] if body == "topside" else 0.0)
+                    placed.append(PlacedMarker(mid, np.linalg.inv(T_jacket_cam) @ T_body_m, 1.0))
+                gray = render(PAPER_K, dist, PAPER_SIZE, placed, noise=noise, seed=k)
+                frame = av.VideoFrame.from_ndarray(np.dstack([gray] * 3), format="bgr24")
+                frame.pts = round((t - times[name][0]) * 1000)
+                frame.time_base = stream.codec_context.time_base
+                out.mux(stream.encode(frame))
+            out.mux(stream.encode(None))
+    (folder / "rig.yaml").write_text(yaml.safe_dump(rig_dict(cams), sort_keys=False))

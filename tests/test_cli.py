@@ -1,0 +1,167 @@
+"""The `topside` command end to end: real files, real video encode/decode, one-line errors with exit 2."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from tests.synthetic import render_installation
+
+TOPSIDE = [sys.executable, "-m", "tracking.cli"]
+FRAMES = 12
+MOTION = np.column_stack([np.linspace(0.0, 0.6, FRAMES), np.linspace(-0.3, 0.0, FRAMES), np.full(FRAMES, 0.4)])
+DIST = np.array([-0.08, 0.03, 0.0, 0.0, 0.0])
+
+
+def run(*args: str | Path) -> subprocess.CompletedProcess:
+    return subprocess.run([*TOPSIDE, *map(str, args)], capture_output=True, text=True, timeout=120)
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    for fragment in fragments:
+        assert fragment in lines[0]
+
+
+@pytest.fixture(scope="module")
+def installation(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("installation")
+    t = np.arange(FRAMES) / 15.0
+    # unsynchronised cameras: the second starts 1/30 s later on the common clock
+    render_installation(folder, MOTION, {"cam-ahead": 100.0 + t, "cam-port": 100.0 + 1 / 30 + t}, DIST)
+    return folder
+
+
+def truth_at(times: np.ndarray) -> np.ndarray:
+    frame = np.round((times - 100.0) * 15.0 - (times - 100.0) * 15.0 % 1).astype(int)
+    return MOTION[np.clip(frame, 0, FRAMES - 1)]
+
+
+def test_track_raw(installation: Path, tmp_path: Path) -> None:
+    out = tmp_path / "offsets.csv"
+    proc = run("track", "--rig", installation / "rig.yaml", "-o", out)
+    assert proc.returncode == 0, proc.stderr
+    df = pd.read_csv(out)
+    assert list(df.columns) == ["time", "cone", "dx", "dy", "dz", "cameras"]
+    assert len(df) == 2 * FRAMES  # each camera sees one pair in every frame
+    assert df["time"].is_monotonic_increasing
+    assert set(df["cameras"]) == {"cam-ahead", "cam-port"}
+    ahead = df[df.cameras == "cam-ahead"]
+    np.testing.assert_allclose(ahead["time"], 100.0 + np.arange(FRAMES) / 15.0, atol=1e-3)  # capture time
+    err = ahead[["dx", "dy", "dz"]].to_numpy() - MOTION
+    assert np.abs(err[:, [0, 2]]).max() < 0.03  # lateral and vertical for the camera facing the 'ahead' face
+    assert np.abs(err[:, 1]).max() < 0.15  # depth
+    assert "cam-ahead" in proc.stdout and "wrote 24 rows" in proc.stdout
+
+
+def test_track_paper_mode(installation: Path, tmp_path: Path) -> None:
+    out = tmp_path / "paper.csv"
+    proc = run("track", "--rig", installation / "rig.yaml", "--mode", "paper", "-o", out)
+    assert proc.returncode == 0, proc.stderr
+    df = pd.read_csv(out)
+    assert len(df) == 2 * FRAMES
+    # dx from the camera on the 'ahead' face, dy from the one on 'port', dz the mean of both (eq. 21)
+    last = df.iloc[-1]
+    assert last["cameras"] == "cam-ahead cam-port"
+    window = MOTION[-10:].mean(axis=0)  # a 10-sample running average lags the ramp
+    assert last["dx"] == pytest.approx(window[0], abs=0.03)
+    assert last["dy"] == pytest.approx(window[1], abs=0.03)
+    assert last["dz"] == pytest.approx(window[2], abs=0.03)
+    assert np.isnan(df.iloc[0]["dy"])  # the first row has only the first camera's axes
+
+
+def test_detect_json_with_poses(installation: Path, tmp_path: Path) -> None:
+    proc = run("detect", installation / "cam-ahead.mp4", "--rig", installation / "rig.yaml",
+               "--camera", installation / "calibration/cam-ahead.yaml", "--json")
+    assert proc.returncode == 0, proc.stderr
+    rows = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert len(rows) == FRAMES
+    assert [m["id"] for m in rows[0]["markers"]] == [1, 2]
+    assert rows[0]["markers"][0]["pose"]["choice"] in ("unique", "ambiguous")
+    assert 19 < np.linalg.norm(rows[0]["markers"][0]["pose"]["tvec"]) < 22  # camera 20.2 m from marker 1
+
+
+def test_unknown_ids_in_video_counted(installation: Path, tmp_path: Path) -> None:
+    rig = yaml.safe_load((installation / "rig.yaml").read_text())
+    rig["markers"] = [m for m in rig["markers"] if m["id"] != 2]
+    rig["pairs"] = [p for p in rig["pairs"] if p["topside"] != 2]
+    for cam in rig["cameras"]:
+        cam["calibration"] = str(installation / cam["calibration"])
+        cam["source"] = str(installation / cam["source"])
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(rig))
+    proc = run("track", "--rig", tmp_path / "rig.yaml", "-o", tmp_path / "o.csv")
+    assert proc.returncode == 0, proc.stderr
+    assert f"id 2: {FRAMES}" in proc.stdout
+
+
+def test_calibrate_cli(shared_data: Path, tmp_path: Path) -> None:
+    photos = sorted((shared_data / "calibration/opencv-left").glob("left*.jpg"))
+    proc = run("calibrate", *photos, "--board", "chessboard:9x6:0.025", "-o", tmp_path / "cam.yaml")
+    assert proc.returncode == 0, proc.stderr
+    assert "total RMS reprojection error: 0.196" in proc.stdout
+    assert "fx =" in proc.stdout and "±" in proc.stdout
+    from tracking.camera import load_camera
+
+    assert load_camera(tmp_path / "cam.yaml").K[0, 0] == pytest.approx(532.8, abs=1)
+
+
+def test_calibrate_warns_partial_coverage(shared_data: Path, tmp_path: Path) -> None:
+    photos = sorted((shared_data / "aruco/opencv-tutorial").glob("img_0*.jpg"))
+    proc = run("calibrate", *photos, "--board", "charuco:5x7:0.04:0.02:DICT_6X6_250", "-o", tmp_path / "c.yaml")
+    assert proc.returncode == 0, proc.stderr
+    assert "covered only" in proc.stdout
+
+
+# --- bad input: one line naming the file and field, exit status 2 ---------------------------------------
+
+def test_unreadable_image(tmp_path: Path) -> None:
+    bad = tmp_path / "broken.png"
+    bad.write_bytes(b"not an image")
+    assert_one_line_error(run("detect", bad), str(bad), "cannot be read as an image")
+
+
+def test_unreadable_video(tmp_path: Path) -> None:
+    bad = tmp_path / "broken.mp4"
+    bad.write_bytes(b"\x00" * 1000)
+    assert_one_line_error(run("detect", bad), str(bad), "cannot be opened as a video")
+
+
+def test_unknown_dictionary(installation: Path) -> None:
+    assert_one_line_error(run("detect", installation / "cam-ahead.mp4", "--dictionary", "DICT_7X7_9"),
+                          "--dictionary", "unknown ArUco dictionary 'DICT_7X7_9'")
+
+
+def test_rig_with_duplicate_id(installation: Path, tmp_path: Path) -> None:
+    rig = yaml.safe_load((installation / "rig.yaml").read_text())
+    rig["markers"][1]["id"] = rig["markers"][0]["id"]
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(rig))
+    assert_one_line_error(run("track", "--rig", tmp_path / "rig.yaml"), str(tmp_path / "rig.yaml"),
+                          "duplicate marker id 1")
+
+
+def test_calibration_missing_field(installation: Path, tmp_path: Path) -> None:
+    text = (installation / "calibration/cam-ahead.yaml").read_text()
+    cam = tmp_path / "cam.yaml"
+    cam.write_text("\n".join(line for line in text.splitlines() if not line.startswith("image_height")))
+    assert_one_line_error(run("detect", installation / "cam-ahead.mp4", "--camera", cam),
+                          str(cam), "image_height: missing")
+
+
+def test_marker_not_in_rig_in_an_image(installation: Path, tmp_path: Path, shared_data: Path) -> None:
+    photo = shared_data / "aruco/opencv-tutorial/singlemarkersoriginal.jpg"
+    assert_one_line_error(run("detect", photo, "--rig", installation / "rig.yaml"),
+                          str(photo), "marker id 23 is not in the rig")
+
+
+def test_missing_rig_file(tmp_path: Path) -> None:
+    assert_one_line_error(run("track", "--rig", tmp_path / "nope.yaml"), "nope.yaml", "rig file not found")
