@@ -153,9 +153,9 @@ def face_T(face: str) -> np.ndarray:
 CAMERA_EYES = {"cam-ahead": np.array([-9.0, -32.0, 4.0]), "cam-port": np.array([8.0, -8.0, 3.0])}
 
 
-def render_installation(folder, offsets: np.ndarray, times: dict[str, np.ndarray], dist: np.ndarray,
+def render_installation(folder, motion, times: dict[str, np.ndarray], dist: np.ndarray,
                         noise: float = 1.0) -> None:
-    """Write rig.yaml, calibration/*.yaml and one H.264 video per camera; offsets (N, 3) per frame index."""
+    """Write rig.yaml, calibration/*.yaml, one H.264 video per camera and truth.csv; motion(t) -> offset (3,)."""
     import av
     import yaml
 
@@ -180,7 +180,7 @@ def render_installation(folder, offsets: np.ndarray, times: dict[str, np.ndarray
                 for mid, (body, face, c) in centres.items():
                     T_body_m = np.eye(4)
                     T_body_m[:3, :3] = face_T(face)
-                    T_body_m[:3, 3] = c + (offsets[k] if body == "topside" else 0.0)
+                    T_body_m[:3, 3] = c + (motion(t) if body == "topside" else 0.0)
                     placed.append(PlacedMarker(mid, np.linalg.inv(T_jacket_cam) @ T_body_m, 1.0))
                 gray = render(PAPER_K, dist, PAPER_SIZE, placed, noise=noise, seed=k)
                 frame = av.VideoFrame.from_ndarray(np.dstack([gray] * 3), format="bgr24")
@@ -189,3 +189,8 @@ def render_installation(folder, offsets: np.ndarray, times: dict[str, np.ndarray
                 out.mux(stream.encode(frame))
             out.mux(stream.encode(None))
     (folder / "rig.yaml").write_text(yaml.safe_dump(rig_dict(cams), sort_keys=False))
+    t_all = np.arange(min(t[0] for t in times.values()) - 0.1, max(t[-1] for t in times.values()) + 0.1, 0.01)
+    truth = np.array([motion(t) for t in t_all])
+    lines = ["time,cone_A_dx,cone_A_dy,cone_A_dz"] + [f"{t:.4f},{a:.6f},{b:.6f},{c:.6f}"
+                                                      for t, (a, b, c) in zip(t_all, truth, strict=True)]
+    (folder / "truth.csv").write_text("\n".join(lines) + "\n")

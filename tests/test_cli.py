@@ -16,7 +16,8 @@ from tests.synthetic import render_installation
 
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]
 FRAMES = 12
-MOTION = np.column_stack([np.linspace(0.0, 0.6, FRAMES), np.linspace(-0.3, 0.0, FRAMES), np.full(FRAMES, 0.4)])
+T0 = 100.0
+FPS = 15.0
 DIST = np.array([-0.08, 0.03, 0.0, 0.0, 0.0])
 
 
@@ -33,18 +34,19 @@ def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) ->
         assert fragment in lines[0]
 
 
+def motion(t: float) -> np.ndarray:
+    """The topside's true offset at capture time t: a ramp in x and y at constant height."""
+    s = (t - T0) / (FRAMES / FPS)
+    return np.array([0.6 * s, -0.3 + 0.3 * s, 0.4])
+
+
 @pytest.fixture(scope="module")
 def installation(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("installation")
-    t = np.arange(FRAMES) / 15.0
+    t = T0 + np.arange(FRAMES) / FPS
     # unsynchronised cameras: the second starts 1/30 s later on the common clock
-    render_installation(folder, MOTION, {"cam-ahead": 100.0 + t, "cam-port": 100.0 + 1 / 30 + t}, DIST)
+    render_installation(folder, motion, {"cam-ahead": t, "cam-port": t + 1 / 30}, DIST)
     return folder
-
-
-def truth_at(times: np.ndarray) -> np.ndarray:
-    frame = np.round((times - 100.0) * 15.0 - (times - 100.0) * 15.0 % 1).astype(int)
-    return MOTION[np.clip(frame, 0, FRAMES - 1)]
 
 
 def test_track_raw(installation: Path, tmp_path: Path) -> None:
@@ -57,8 +59,10 @@ def test_track_raw(installation: Path, tmp_path: Path) -> None:
     assert df["time"].is_monotonic_increasing
     assert set(df["cameras"]) == {"cam-ahead", "cam-port"}
     ahead = df[df.cameras == "cam-ahead"]
-    np.testing.assert_allclose(ahead["time"], 100.0 + np.arange(FRAMES) / 15.0, atol=1e-3)  # capture time
-    err = ahead[["dx", "dy", "dz"]].to_numpy() - MOTION
+    np.testing.assert_allclose(ahead["time"], T0 + np.arange(FRAMES) / FPS, atol=1e-3)  # capture time
+    port = df[df.cameras == "cam-port"]
+    np.testing.assert_allclose(port["time"], T0 + 1 / 30 + np.arange(FRAMES) / FPS, atol=1e-3)
+    err = ahead[["dx", "dy", "dz"]].to_numpy() - np.array([motion(t) for t in ahead["time"]])
     assert np.abs(err[:, [0, 2]]).max() < 0.03  # lateral and vertical for the camera facing the 'ahead' face
     assert np.abs(err[:, 1]).max() < 0.15  # depth
     assert "cam-ahead" in proc.stdout and "wrote 24 rows" in proc.stdout
@@ -73,11 +77,23 @@ def test_track_paper_mode(installation: Path, tmp_path: Path) -> None:
     # dx from the camera on the 'ahead' face, dy from the one on 'port', dz the mean of both (eq. 21)
     last = df.iloc[-1]
     assert last["cameras"] == "cam-ahead cam-port"
-    window = MOTION[-10:].mean(axis=0)  # a 10-sample running average lags the ramp
+    window = np.mean([motion(t) for t in df["time"].to_numpy()[-20:]], axis=0)  # 10 per camera: lags the ramp
     assert last["dx"] == pytest.approx(window[0], abs=0.03)
     assert last["dy"] == pytest.approx(window[1], abs=0.03)
     assert last["dz"] == pytest.approx(window[2], abs=0.03)
     assert np.isnan(df.iloc[0]["dy"])  # the first row has only the first camera's axes
+
+
+def test_evaluate(installation: Path, tmp_path: Path) -> None:
+    out = tmp_path / "offsets.csv"
+    assert run("track", "--rig", installation / "rig.yaml", "-o", out).returncode == 0
+    proc = run("evaluate", out, installation / "truth.csv", "--markdown", tmp_path / "acc.md")
+    assert proc.returncode == 0, proc.stderr
+    table = (tmp_path / "acc.md").read_text()
+    rows = {line.split("|")[1].strip(): line for line in table.splitlines() if line.startswith("| ")}
+    mae_z = float(rows["z"].split("|")[2])
+    assert 0.0 < mae_z < 0.02  # height is lateral for both cameras
+    assert "| 24 |" in rows["x"]
 
 
 def test_detect_json_with_poses(installation: Path, tmp_path: Path) -> None:

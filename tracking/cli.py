@@ -203,6 +203,29 @@ def simulate(
     run_simulate(scenario, out, seed=seed, duration=duration)
 
 
+@app.command()
+def evaluate(
+    offsets: Annotated[Path, typer.Argument(help="Offsets CSV from `topside track`.")],
+    truth: Annotated[Path, typer.Argument(help="Ground-truth log (truth.csv from `topside simulate`).")],
+    markdown: Annotated[Path | None, typer.Option(help="Also write the table as markdown.")] = None,
+) -> None:
+    """Print the paper's accuracy table (e_MAE, |e|max, σ_e, μ_e per axis) and RMSE against the truth."""
+    from rich.table import Table
+
+    from tracking.evaluate import errors, markdown_table, read_offsets, read_truth, summary
+
+    stats = summary(errors(read_offsets(offsets), read_truth(truth)))
+    table = Table(title=f"{offsets.name} against {truth.name} (m)")
+    for col in ("axis", "e_MAE", "|e|max", "σ_e", "μ_e", "RMSE", "n"):
+        table.add_column(col, justify="right")
+    for axis, s in stats.items():
+        table.add_row(axis, f"{s.mae:.3f}", f"{s.max_abs:.3f}", f"{s.std:.3f}", f"{s.mean:.3f}", f"{s.rmse:.3f}",
+                      str(s.n))
+    console.print(table)
+    if markdown:
+        markdown.write_text(markdown_table(stats, f"{offsets.name} against {truth.name}") + "\n")
+
+
 def main() -> None:
     """Console entry point: bad input becomes one line on stderr and exit status 2."""
     try:
