@@ -12,13 +12,9 @@ import pandas as pd
 import pytest
 import yaml
 
-from tests.synthetic import render_installation
+from tests.conftest import FPS, FRAMES, T0, motion
 
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]
-FRAMES = 12
-T0 = 100.0
-FPS = 15.0
-DIST = np.array([-0.08, 0.03, 0.0, 0.0, 0.0])
 
 
 def run(*args: str | Path) -> subprocess.CompletedProcess:
@@ -32,21 +28,6 @@ def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) ->
     assert "Traceback" not in proc.stderr
     for fragment in fragments:
         assert fragment in lines[0]
-
-
-def motion(t: float) -> np.ndarray:
-    """The topside's true offset at capture time t: a ramp in x and y at constant height."""
-    s = (t - T0) / (FRAMES / FPS)
-    return np.array([0.6 * s, -0.3 + 0.3 * s, 0.4])
-
-
-@pytest.fixture(scope="module")
-def installation(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("installation")
-    t = T0 + np.arange(FRAMES) / FPS
-    # unsynchronised cameras: the second starts 1/30 s later on the common clock
-    render_installation(folder, motion, {"cam-ahead": t, "cam-port": t + 1 / 30}, DIST)
-    return folder
 
 
 def test_track_raw(installation: Path, tmp_path: Path) -> None:

@@ -150,10 +150,14 @@ def track(
     out: Annotated[Path, typer.Option("-o", "--out", help="Offsets CSV to write.")] = Path("offsets.csv"),
     mode: Annotated[str, typer.Option(help="raw: every camera's pair offset; paper: the paper's method.")] = "raw",
     refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = Refinement.SUBPIX,
+    rrd: Annotated[Path | None, typer.Option(help="Also record everything to this Rerun file (.rrd).")] = None,
+    truth: Annotated[Path | None, typer.Option(help="Ground-truth log to overlay in the recording.")] = None,
+    rejected: Annotated[bool, typer.Option("--rejected", help="Record rejected marker candidates too.")] = False,
 ) -> None:
-    """Track the rig's videos and write the offset at each cone per timestamp (CSV)."""
+    """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording."""
     from rich.table import Table
 
+    from tracking.evaluate import read_truth
     from tracking.filtering import paper_filter, raw_estimates
     from tracking.pipeline import TrackStats, source_frame_count, track_rig
     from tracking.report import write_offsets_csv
@@ -162,6 +166,12 @@ def track(
     if mode not in ("raw", "paper"):
         raise InputError("--mode", f"{mode!r} is not a mode (expected raw or paper)")
     the_rig = load_rig(rig)
+    truth_df = read_truth(truth) if truth else None
+    recorder = None
+    if rrd is not None:
+        from viewer.session import Recorder  # the CLI composes tracker and viewer; tracking/ never imports viewer
+
+        recorder = Recorder(the_rig, rrd, truth_df, show_rejected=rejected)
     stats = TrackStats()
     totals = [source_frame_count(the_rig.resolve(c.source)) for c in the_rig.cameras]
     total = sum(t for t in totals if t) or None
@@ -169,13 +179,25 @@ def track(
         task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras", total=total)
 
         def measurements():
-            for result in track_rig(the_rig, refine):
+            for result in track_rig(the_rig, refine, keep_color=recorder is not None):
                 stats.add(result)
                 progress.advance(task)
+                if recorder is not None:
+                    recorder.on_frame(result)
                 yield from result.offsets
 
+        def recorded(estimates):
+            for e in estimates:
+                if recorder is not None:
+                    recorder.on_estimate(e)
+                yield e
+
         estimates = paper_filter(the_rig, measurements()) if mode == "paper" else raw_estimates(measurements())
-        n_rows = write_offsets_csv(out, estimates)
+        try:
+            n_rows = write_offsets_csv(out, recorded(estimates))
+        finally:
+            if recorder is not None:
+                recorder.close()
     table = Table(title=f"tracked {rig} ({mode} mode)")
     for col in ("camera", "frames", "markers", "pair offsets", "ambiguous"):
         table.add_column(col, justify="right" if col != "camera" else "left")
@@ -188,19 +210,20 @@ def track(
         summary = ", ".join(f"id {i}: {n}" for i, n in sorted(stats.unknown_ids.items()))
         console.print(f"[yellow]markers not in the rig (ignored): {summary}[/yellow]")
     console.print(f"wrote {n_rows} rows to {out}")
+    if rrd is not None:
+        console.print(f"wrote {rrd} (open it with: topside view {rrd})")
 
 
 @app.command()
-def simulate(
-    scenario: Annotated[str, typer.Argument(help="Scenario YAML file or built-in name (e.g. config2-procedure5).")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder for videos, rig, calibration, truth.")],
-    seed: Annotated[int | None, typer.Option(help="Random seed (default: the scenario's).")] = None,
-    duration: Annotated[float | None, typer.Option(help="Cut the scenario to this many seconds.")] = None,
+def view(
+    recording: Annotated[Path, typer.Argument(help="A Rerun recording (.rrd).")],
+    web: Annotated[bool, typer.Option("--web", help="Serve the web viewer instead of opening the native one.")] = False,
+    bind: Annotated[str, typer.Option(help="Address the web viewer listens on.")] = "127.0.0.1",
 ) -> None:
-    """Render a scenario: one video per camera, the rig, calibration files and the ground-truth log."""
-    from tracking.sim.command import run_simulate
+    """Open a recording in Rerun's viewer (native, or web with --web)."""
+    from viewer.playback import open_viewer
 
-    run_simulate(scenario, out, seed=seed, duration=duration)
+    open_viewer(recording, web=web, bind=bind)
 
 
 @app.command()

@@ -1,0 +1,105 @@
+"""Recordings read back with rerun's own API: entities, row counts, values equal to the CSV's."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import rerun as rr
+
+from tests.conftest import FRAMES, REPO
+from viewer.playback import rerun_binary
+from viewer.readback import chunks_by_entity, component_rows
+
+
+@pytest.fixture(scope="module")
+def recorded(installation: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, pd.DataFrame]:
+    out = tmp_path_factory.mktemp("rec")
+    proc = subprocess.run([sys.executable, "-m", "tracking.cli", "track", "--rig", str(installation / "rig.yaml"),
+                           "--truth", str(installation / "truth.csv"), "--mode", "paper",
+                           "-o", str(out / "offsets.csv"), "--rrd", str(out / "run.rrd")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return out / "run.rrd", pd.read_csv(out / "offsets.csv")
+
+
+def test_entities_and_row_counts(recorded: tuple[Path, pd.DataFrame]) -> None:
+    rrd, _ = recorded
+    chunks = chunks_by_entity(rrd)
+    for cam in ("cam-ahead", "cam-port"):
+        times, images = component_rows(chunks[f"/world/cameras/{cam}/image"], "EncodedImage:blob")
+        assert len(images) == FRAMES
+        assert np.all(np.diff(times) > 0)
+        _, strips = component_rows(chunks[f"/world/cameras/{cam}/image/markers"], "LineStrips2D:strips")
+        assert all(len(s) == 2 for s in strips)  # both markers of the pair outlined in every frame
+        _, pinhole = component_rows(chunks[f"/world/cameras/{cam}"], "Pinhole:image_from_camera")
+        assert len(pinhole) == 1  # static
+        _, translations = component_rows(chunks[f"/world/cameras/{cam}"], "Transform3D:translation")
+        assert len(translations) == FRAMES  # the markers place the camera in every frame
+    for mid in (1, 2, 3, 4):
+        assert any(p.endswith(f"/{mid}") for p in chunks if p.startswith("/world/estimated/"))
+    assert "/status" in chunks and "/world/jacket/cones" in chunks
+
+
+def test_offsets_equal_csv(recorded: tuple[Path, pd.DataFrame]) -> None:
+    rrd, df = recorded
+    chunks = chunks_by_entity(rrd)
+    for axis in ("dx", "dy", "dz"):
+        times, values = component_rows(chunks[f"/offsets/{axis}/A/estimate"], "Scalars:scalars")
+        expected = df[np.isfinite(df[axis])]
+        assert len(values) == len(expected)
+        np.testing.assert_allclose(times, expected["time"], atol=1e-6)
+        np.testing.assert_allclose([v[0] for v in values], expected[axis], atol=1e-5)
+
+
+def test_truth_and_errors(recorded: tuple[Path, pd.DataFrame], installation: Path) -> None:
+    rrd, df = recorded
+    chunks = chunks_by_entity(rrd)
+    truth = pd.read_csv(installation / "truth.csv")
+    _, true_dx = component_rows(chunks["/offsets/dx/A/truth"], "Scalars:scalars")
+    assert len(true_dx) == len(truth)
+    _, errors = component_rows(chunks["/errors/dz/A"], "Scalars:scalars")
+    assert len(errors) == len(df)
+    assert np.abs([e[0] for e in errors]).max() < 0.05
+
+
+def test_blueprint_stored_and_file_verifies(recorded: tuple[Path, pd.DataFrame]) -> None:
+    rrd, _ = recorded
+    assert len(rr.chunk.RrdReader(rrd).blueprints()) == 1
+    proc = subprocess.run([rerun_binary(), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_logging_is_strict_clean(installation: Path, tmp_path: Path) -> None:
+    from tracking.pipeline import track_rig
+    from tracking.rig import load_rig
+    from viewer.session import Recorder
+
+    rr.set_strict_mode(True)
+    try:
+        rig = load_rig(installation / "rig.yaml")
+        recorder = Recorder(rig, tmp_path / "strict.rrd", pd.read_csv(installation / "truth.csv"), show_rejected=True)
+        for i, result in enumerate(track_rig(rig, keep_color=True)):
+            recorder.on_frame(result)
+            if i == 3:
+                break
+        recorder.close()
+    finally:
+        rr.set_strict_mode(False)
+    assert (tmp_path / "strict.rrd").stat().st_size > 0
+
+
+def test_tracking_never_imports_viewer() -> None:
+    """Pipeline stages never import viewer/; only the CLI (the composition root) does, lazily."""
+    for path in (REPO / "tracking").rglob("*.py"):
+        if path.name == "cli.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            assert not any(n.split(".")[0] == "viewer" for n in names), path

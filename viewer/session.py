@@ -1,0 +1,83 @@
+"""A recording session: the tracker's stream of results in, a Rerun .rrd file out."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import rerun as rr
+
+from tracking.camera import CameraModel, load_camera
+from tracking.filtering import ConeEstimate
+from tracking.pipeline import FrameResult
+from tracking.rig import Rig
+from viewer.blueprint import analysis_blueprint
+from viewer.recording import (
+    APP_ID,
+    StatusBoard,
+    log_camera_model,
+    log_error,
+    log_estimate,
+    log_frame,
+    log_rig,
+    log_series_styles,
+    log_truth,
+)
+
+
+def _truth_series(truth: pd.DataFrame) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """cone -> (times (N,), true offsets (N, 3)) from a truth log's cone_<C>_dx/dy/dz columns."""
+    cones = {c[len("cone_"):-len("_dx")] for c in truth.columns if c.startswith("cone_") and c.endswith("_dx")}
+    times = truth["time"].to_numpy(dtype=float)
+    return {cone: (times, truth[[f"cone_{cone}_{a}" for a in ("dx", "dy", "dz")]].to_numpy(dtype=float))
+            for cone in cones}
+
+
+class Recorder:
+    """Logs frames and estimates of one tracked installation into a Rerun recording."""
+
+    def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
+                 show_rejected: bool = False, recording_id: str | None = None) -> None:
+        self.rig = rig
+        self.truth = truth
+        self.show_rejected = show_rejected
+        self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
+        self.cameras: dict[str, CameraModel] = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
+        self.status = StatusBoard()
+        self._truth_series = _truth_series(truth) if truth is not None else {}
+        self._last_time = 0.0
+        if rrd is not None:
+            Path(rrd).parent.mkdir(parents=True, exist_ok=True)
+            self.rec.save(rrd, default_blueprint=analysis_blueprint(rig, truth is not None))
+        cones = sorted({p.cone for p in rig.all_pairs()} | set(rig.cones))
+        log_rig(self.rec, rig)
+        for name, cam in self.cameras.items():
+            log_camera_model(self.rec, name, cam)
+        log_series_styles(self.rec, cones, truth is not None)
+        if truth is not None:
+            log_truth(self.rec, truth, cones)
+
+    def on_frame(self, result: FrameResult) -> None:
+        """Log one processed frame."""
+        log_frame(self.rec, self.rig, self.cameras[result.camera], result, self.show_rejected)
+        self.status.frames[result.camera] = self.status.frames.get(result.camera, 0) + 1
+        self.status.markers[result.camera] = self.status.markers.get(result.camera, 0) + len(result.poses)
+        self._last_time = max(self._last_time, result.time)
+
+    def on_estimate(self, estimate: ConeEstimate) -> None:
+        """Log one cone estimate, its error against the truth, and the status panel when due."""
+        log_estimate(self.rec, estimate)
+        series = self._truth_series.get(estimate.cone)
+        if series is not None:
+            times, values = series
+            true = np.array([np.interp(estimate.time, times, values[:, i]) for i in range(3)])
+            log_error(self.rec, estimate, true)
+        self.status.latest[estimate.cone] = estimate
+        self.status.log_if_due(self.rec, estimate.time)
+
+    def close(self) -> None:
+        """Final status and flush to disk."""
+        self.status.log_if_due(self.rec, self._last_time, force=True)
+        self.rec.flush()
+        self.rec.disconnect()
