@@ -1,0 +1,165 @@
+"""Built-in scenarios: the paper's procedures 1-7 (Tables I and II) in its two camera configurations.
+
+Configuration 1 (Fig. 9): pairs on two perpendicular faces at 45 deg to the vessel on cones A and B,
+four stern cameras (one per pair), and one drone on a pair of rear cone C. Configuration 2
+(Fig. 10): pairs on cones A and D; A is filmed by a stern camera and a drone, D by two drones.
+
+Name suffixes: `-weather` adds the paper's fog 50 % and rain 30 %; `-clear` switches off fog, rain,
+noise, shadows, light changes and motion blur (for exact tests).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from tracking.errors import InputError
+from tracking.rig import FACE_NORMALS
+from tracking.sim.scenario import (
+    CalibrationSpec,
+    CameraSpec,
+    MotionSpec,
+    PairSpec,
+    Scenario,
+    SeaSpec,
+    WeatherSpec,
+)
+from tracking.sim.scene import Layout
+
+STERN_CAMERA_Z = 2.0  # m, jacket frame: 27 m above the sea, on the stern crane pedestals
+DRONE_DISTANCE = 15.0  # m from the middle of the watched pair's travel
+DRONE_RISE = 1.0  # m above the middle of the pair's travel
+DRONE_EXPOSURE = 1 / 200
+DRONE_DROP_RATE = 0.002
+PAPER_WEATHER = {"fog": 0.5, "rain": 0.3}
+WAVE_HOLD = 90.0  # s, procedures 3 and 4
+STORM_WIND_KNOTS = 20.0
+
+PROCEDURES: dict[str, tuple[int, list[list[float]]]] = {
+    "procedure1": (1, [[0, -20], [0, 0]]),
+    "procedure2": (1, [[0, 0], [10, 0]]),
+    "procedure3": (1, [[0, 0]]),
+    "procedure4": (1, [[0, 0]]),
+    "procedure5": (2, [[0, -5], [0, 0]]),
+    "procedure6": (2, [[0, 0], [5, 0], [0, 0]]),
+    "procedure7": (2, [[0, 0], [0, -3], [3, -3], [3, 0], [0, 0]]),
+    "setdown": (0, [[0.5, -0.5, 2.0], [0, 0, 2.0], [0, 0, 0]]),
+}
+
+CONFIG1_PAIRS = [("A", "port-ahead"), ("A", "starboard-ahead"), ("B", "port-ahead"), ("B", "starboard-ahead"),
+                 ("C", "starboard-astern")]
+CONFIG1_STERN_X = {("A", "port-ahead"): 34.0, ("A", "starboard-ahead"): -10.0,
+                   ("B", "port-ahead"): 10.0, ("B", "starboard-ahead"): -34.0}
+CONFIG2_PAIRS = [("A", "ahead"), ("A", "port"), ("D", "port"), ("D", "astern")]
+
+
+def pair_points(layout: Layout, cone: str, face: str, waypoints: list[list[float]], hover: float) -> np.ndarray:
+    """(n, 3) jacket marker centre and topside marker centres at every waypoint, jacket frame."""
+    pts = [layout.marker_center(cone, face, "jacket")]
+    top = layout.marker_center(cone, face, "topside")
+    for w in waypoints:
+        pts.append(top + np.array([w[0], w[1], w[2] if len(w) == 3 else hover]))
+    return np.array(pts)
+
+
+def aim_point(layout: Layout, cone: str, face: str, waypoints: list[list[float]], hover: float) -> np.ndarray:
+    """Middle of the box spanned by a pair over the procedure: where its camera looks."""
+    pts = pair_points(layout, cone, face, waypoints, hover)
+    return (pts.min(axis=0) + pts.max(axis=0)) / 2
+
+
+def _drone(name: str, layout: Layout, cone: str, face: str, motion: MotionSpec) -> CameraSpec:
+    aim = aim_point(layout, cone, face, motion.waypoints, motion.hover)
+    n = np.array(FACE_NORMALS[face])
+    pos = aim + DRONE_DISTANCE * n + np.array([0, 0, DRONE_RISE])
+    return CameraSpec(name=name, kind="drone", position=pos.round(3).tolist(), look_at=aim.round(3).tolist(),
+                      watch=f"{cone}/{face}", exposure=DRONE_EXPOSURE, drop_rate=DRONE_DROP_RATE)
+
+
+def _stern(name: str, layout: Layout, cone: str, face: str, x: float, motion: MotionSpec) -> CameraSpec:
+    aim = aim_point(layout, cone, face, motion.waypoints, motion.hover)
+    return CameraSpec(name=name, kind="stern", position=[x, layout.stern_y, STERN_CAMERA_Z],
+                      look_at=aim.round(3).tolist(), watch=f"{cone}/{face}")
+
+
+def configuration(number: int, motion: MotionSpec, layout: Layout) -> tuple[list[PairSpec], list[CameraSpec]]:
+    """Pairs and cameras of the paper's configuration 1 or 2."""
+    if number == 1:
+        pairs = [PairSpec(cone=c, face=f, jacket_id=2 * i, topside_id=2 * i + 1)
+                 for i, (c, f) in enumerate(CONFIG1_PAIRS)]
+        cams = [_stern(f"stern{i + 1}", layout, c, f, CONFIG1_STERN_X[(c, f)], motion)
+                for i, (c, f) in enumerate(CONFIG1_PAIRS[:4])]
+        cams.append(_drone("drone_C", layout, "C", "starboard-astern", motion))
+        return pairs, cams
+    pairs = [PairSpec(cone=c, face=f, jacket_id=2 * i, topside_id=2 * i + 1) for i, (c, f) in enumerate(CONFIG2_PAIRS)]
+    a_x = float(layout.marker_center("A", "ahead", "jacket")[0])
+    cams = [_stern("stern_A", layout, "A", "ahead", a_x, motion),
+            _drone("drone_A", layout, "A", "port", motion),
+            _drone("drone_D1", layout, "D", "port", motion),
+            _drone("drone_D2", layout, "D", "astern", motion)]
+    return pairs, cams
+
+
+def procedure_scenario(config: int, procedure: str) -> Scenario:
+    """Configuration 1 or 2 running one of the paper's procedures (or the set-down)."""
+    _, waypoints = PROCEDURES[procedure]
+    number = int(procedure.removeprefix("procedure")) if procedure.startswith("procedure") else 0
+    layout = Layout()
+    motion_kw: dict = {"waypoints": waypoints}
+    weather = WeatherSpec()
+    if procedure in ("procedure3", "procedure4"):
+        motion_kw.update(sea=SeaSpec(), hold=WAVE_HOLD, wind_knots=STORM_WIND_KNOTS)
+        weather = WeatherSpec(**PAPER_WEATHER)
+    motion = MotionSpec(**motion_kw)
+    pairs, cams = configuration(config, motion, layout)
+    desc = {
+        "procedure1": "Start 20 m ahead, move 20 m astern to the final position (paper Table I).",
+        "procedure2": "Start above the jacket, move 10 m to port (paper Table I).",
+        "procedure3": "Hold above the jacket in a JONSWAP sea (1 m, 8 s, 135 deg, s=4), fog 50 %, rain 30 %.",
+        "procedure4": "As procedure 3 with another wave realisation (paper Table I).",
+        "procedure5": "Start 5 m ahead, move 5 m astern to the final position (paper Table II).",
+        "procedure6": "Start above, 5 m to port, 5 m back to starboard (paper Table II).",
+        "procedure7": "Start above, 3 m ahead, 3 m port, 3 m astern, 3 m starboard (paper Table II).",
+        "setdown": "Align from 0.7 m off and lower 2 m onto the cones (not in the paper).",
+    }[procedure]
+    seed = {"procedure4": 44}.get(procedure, number or 8 + config)
+    return Scenario(name=f"config{config}-{procedure}", description=desc, seed=seed, layout=layout,
+                    pairs=pairs, cameras=cams, motion=motion, weather=weather)
+
+
+def calibration_scenario() -> Scenario:
+    """Thirty chessboard shots with the paper's camera (experiment 1)."""
+    cam = CameraSpec(name="camera", kind="drone", position=[0, -10, 0], look_at=[0, 0, 0])
+    return Scenario(name="calibration-shots", description="Chessboard shots for calibration (paper exp. 1).",
+                    seed=1, cameras=[cam], calibration=CalibrationSpec(),
+                    weather=WeatherSpec(noise=1.0, shadows=0.0, light_variation=0.0, motion_blur=False))
+
+
+BUILTINS: dict[str, Callable[[], Scenario]] = {
+    **{f"config1-procedure{i}": (lambda i=i: procedure_scenario(1, f"procedure{i}")) for i in range(1, 5)},
+    **{f"config2-procedure{i}": (lambda i=i: procedure_scenario(2, f"procedure{i}")) for i in range(5, 8)},
+    "config1-setdown": lambda: procedure_scenario(1, "setdown"),
+    "config2-setdown": lambda: procedure_scenario(2, "setdown"),
+    "calibration-shots": calibration_scenario,
+}
+CLEAR_WEATHER = {"fog": 0.0, "rain": 0.0, "noise": 0.0, "shadows": 0.0, "light_variation": 0.0,
+                 "motion_blur": False}
+
+
+def builtin_names() -> list[str]:
+    """Names of the built-in scenarios (each also with -weather and -clear)."""
+    return list(BUILTINS)
+
+
+def builtin_scenario(name: str, missing_ok: bool = False) -> Scenario | None:
+    """A built-in scenario by name, with an optional -weather or -clear suffix."""
+    for suffix, weather in (("-weather", PAPER_WEATHER), ("-clear", CLEAR_WEATHER)):
+        if name.endswith(suffix) and name.removesuffix(suffix) in BUILTINS:
+            base = BUILTINS[name.removesuffix(suffix)]()
+            return base.model_copy(update={"name": name, "weather": base.weather.model_copy(update=weather)})
+    if name in BUILTINS:
+        return BUILTINS[name]()
+    if missing_ok:
+        return None
+    raise InputError(name, f"unknown built-in scenario (expected one of {', '.join(BUILTINS)})")
