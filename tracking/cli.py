@@ -227,6 +227,19 @@ def view(
 
 
 @app.command()
+def simulate(
+    scenario: Annotated[str, typer.Argument(help="Scenario YAML file or built-in name (e.g. config2-procedure5).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder for videos, rig, calibration, truth.")],
+    seed: Annotated[int | None, typer.Option(help="Random seed (default: the scenario's).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Cut the scenario to this many seconds.")] = None,
+) -> None:
+    """Render a scenario: one video per camera, the rig, calibration files and the ground-truth log."""
+    from tracking.sim.command import run_simulate
+
+    run_simulate(scenario, out, seed=seed, duration=duration)
+
+
+@app.command()
 def evaluate(
     offsets: Annotated[Path, typer.Argument(help="Offsets CSV from `topside track`.")],
     truth: Annotated[Path, typer.Argument(help="Ground-truth log (truth.csv from `topside simulate`).")],
