@@ -30,6 +30,7 @@ from tracking.sim.scene import Layout
 STERN_CAMERA_Z = 2.0  # m, jacket frame: 27 m above the sea, on the stern crane pedestals
 DRONE_DISTANCE = 15.0  # m from the middle of the watched pair's travel
 DRONE_RISE = 1.0  # m above the middle of the pair's travel
+DRONE_REACH = 8.0  # m: a drone frames the last this-many metres of a longer move (20 m do not fit)
 DRONE_EXPOSURE = 1 / 200
 DRONE_DROP_RATE = 0.002
 PAPER_WEATHER = {"fog": 0.5, "rain": 0.3}
@@ -51,6 +52,7 @@ CONFIG1_PAIRS = [("A", "port-ahead"), ("A", "starboard-ahead"), ("B", "port-ahea
                  ("C", "starboard-astern")]
 CONFIG1_STERN_X = {("A", "port-ahead"): 34.0, ("A", "starboard-ahead"): -10.0,
                    ("B", "port-ahead"): 10.0, ("B", "starboard-ahead"): -34.0}
+STERN_FOLLOW = 0.4  # stern cameras sit this fraction of a port move further to port (procedure 2: 4 m)
 CONFIG2_PAIRS = [("A", "ahead"), ("A", "port"), ("D", "port"), ("D", "astern")]
 
 
@@ -63,14 +65,20 @@ def pair_points(layout: Layout, cone: str, face: str, waypoints: list[list[float
     return np.array(pts)
 
 
-def aim_point(layout: Layout, cone: str, face: str, waypoints: list[list[float]], hover: float) -> np.ndarray:
-    """Middle of the box spanned by a pair over the procedure: where its camera looks."""
-    pts = pair_points(layout, cone, face, waypoints, hover)
+def aim_point(layout: Layout, cone: str, face: str, waypoints: list[list[float]], hover: float,
+              reach: float = np.inf) -> np.ndarray:
+    """Middle of the box spanned by a pair over the procedure (offsets clipped to reach m): where its camera looks."""
+    clipped = []
+    for w in waypoints:
+        xy = np.array(w[:2], float)
+        n = np.linalg.norm(xy)
+        clipped.append([*(xy * min(1.0, reach / n) if n > 0 else xy), *w[2:]])
+    pts = pair_points(layout, cone, face, clipped, hover)
     return (pts.min(axis=0) + pts.max(axis=0)) / 2
 
 
 def _drone(name: str, layout: Layout, cone: str, face: str, motion: MotionSpec) -> CameraSpec:
-    aim = aim_point(layout, cone, face, motion.waypoints, motion.hover)
+    aim = aim_point(layout, cone, face, motion.waypoints, motion.hover, DRONE_REACH)
     n = np.array(FACE_NORMALS[face])
     pos = aim + DRONE_DISTANCE * n + np.array([0, 0, DRONE_RISE])
     return CameraSpec(name=name, kind="drone", position=pos.round(3).tolist(), look_at=aim.round(3).tolist(),
@@ -88,7 +96,8 @@ def configuration(number: int, motion: MotionSpec, layout: Layout) -> tuple[list
     if number == 1:
         pairs = [PairSpec(cone=c, face=f, jacket_id=2 * i, topside_id=2 * i + 1)
                  for i, (c, f) in enumerate(CONFIG1_PAIRS)]
-        cams = [_stern(f"stern{i + 1}", layout, c, f, CONFIG1_STERN_X[(c, f)], motion)
+        shift = STERN_FOLLOW * max(w[0] for w in motion.waypoints)
+        cams = [_stern(f"stern{i + 1}", layout, c, f, CONFIG1_STERN_X[(c, f)] + shift, motion)
                 for i, (c, f) in enumerate(CONFIG1_PAIRS[:4])]
         cams.append(_drone("drone_C", layout, "C", "starboard-astern", motion))
         return pairs, cams

@@ -36,7 +36,8 @@ MAX_SUPER_PIXELS = 4_000_000  # per plate window; the factor drops for huge clos
 NEAR = 0.3  # m, near clipping plane
 SHIFT = 4  # fractional bits of polygon vertices
 BACKGROUND_STEP = 8  # sky and sea are computed on a grid this much coarser
-UNDISTORT_ITERATIONS = 30
+UNDISTORT_ITERATIONS = 60
+UNDISTORT_TOLERANCE = 1e-12  # normalized units (~1e-9 px)
 SEGMENT_PIECE_M = 8.0  # m, thin members are cut this short for depth sorting
 MARKER_DEPTH_BIAS = 0.3  # m: a plate is drawn after the leg it is fixed to
 SKY_HORIZON = np.array([0.93, 0.86, 0.78])  # BGR albedo-like radiance
@@ -116,11 +117,14 @@ def distort_normalized(x: np.ndarray, y: np.ndarray, dist: np.ndarray) -> tuple[
 
 
 def undistort_normalized(xd: np.ndarray, yd: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse of distort_normalized by fixed-point iteration with a Newton-free update."""
+    """Inverse of distort_normalized by fixed-point iteration, to UNDISTORT_TOLERANCE."""
     x, y = xd.copy(), yd.copy()
     for _ in range(UNDISTORT_ITERATIONS):
         fx, fy = distort_normalized(x, y, dist)
-        x, y = x + (xd - fx), y + (yd - fy)
+        ex, ey = xd - fx, yd - fy
+        x, y = x + ex, y + ey
+        if max(np.abs(ex).max(initial=0), np.abs(ey).max(initial=0)) < UNDISTORT_TOLERANCE:
+            break
     return x, y
 
 
@@ -160,22 +164,39 @@ class CameraRenderer:
 
     # ---- per-camera precomputation -------------------------------------------------------
     def _build_maps(self) -> None:
-        """Canvas intrinsics and the remap from distorted image to ideal canvas."""
+        """Canvas intrinsics: the ideal image must cover every pixel of the distorted picture."""
         w, h = self.size
-        fx, fy, cx, cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
-        u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-        xu, yu = undistort_normalized((u - cx) / fx, (v - cy) / fy, self.dist)
-        iu, iv = fx * xu + cx, fy * yu + cy
+        border = np.concatenate([np.column_stack([np.arange(w), np.zeros(w)]),
+                                 np.column_stack([np.arange(w), np.full(w, h - 1)]),
+                                 np.column_stack([np.zeros(h), np.arange(h)]),
+                                 np.column_stack([np.full(h, w - 1), np.arange(h)])]).astype(np.float64)
+        iu, iv = self._ideal_pixels(border[:, 0], border[:, 1])
         x0 = int(np.floor(min(iu.min(), 0))) - 3
         y0 = int(np.floor(min(iv.min(), 0))) - 3
         x1 = int(np.ceil(max(iu.max(), w - 1))) + 3
         y1 = int(np.ceil(max(iv.max(), h - 1))) + 3
+        self.canvas_origin = (x0, y0)
         self.canvas_size = (x1 - x0 + 1, y1 - y0 + 1)
         self.Kc = self.K.copy()
         self.Kc[0, 2] -= x0
         self.Kc[1, 2] -= y0
-        self.map1, self.map2 = cv2.convertMaps((iu - x0).astype(np.float32), (iv - y0).astype(np.float32),
-                                               cv2.CV_16SC2)
+        self._maps: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _ideal_pixels(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        fx, fy, cx, cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
+        xu, yu = undistort_normalized((u - cx) / fx, (v - cy) / fy, self.dist)
+        return fx * xu + cx, fy * yu + cy
+
+    @property
+    def maps(self) -> tuple[np.ndarray, np.ndarray]:
+        """cv2.remap maps from the distorted picture to the ideal canvas (built on first use)."""
+        if self._maps is None:
+            w, h = self.size
+            u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+            iu, iv = self._ideal_pixels(u, v)
+            x0, y0 = self.canvas_origin
+            self._maps = cv2.convertMaps((iu - x0).astype(np.float32), (iv - y0).astype(np.float32), cv2.CV_16SC2)
+        return self._maps
 
     def _build_background_grid(self) -> None:
         cw, ch = self.canvas_size
@@ -287,20 +308,20 @@ class CameraRenderer:
             items.append((float(d[k]), 0, self._project(P), tuple(cols[k].tolist())))
 
     def _draw_plate(self, canvas: np.ndarray, plate: Plate, T_cp: np.ndarray, T_jp: np.ndarray,
-                    state: FrameState) -> tuple[np.ndarray, tuple[int, int, int, int]] | None:
-        """Composite one plate; returns the black-square polygon (canvas px) and the window drawn."""
+                    state: FrameState) -> bool:
+        """Composite one plate; False when nothing of it is in the canvas."""
         tex = self.textures[plate.key]
         W, Hm = tex.size_m
         corners = np.array([[-W / 2, Hm / 2, 0], [W / 2, Hm / 2, 0], [W / 2, -Hm / 2, 0], [-W / 2, -Hm / 2, 0]])
         P = corners @ T_cp[:3, :3].T + T_cp[:3, 3]
         if (P[:, 2] < NEAR).any():
-            return None
+            return False
         uv = self._project(P)
         cw, ch = self.canvas_size
         x0, y0 = max(int(np.floor(uv[:, 0].min())) - 1, 0), max(int(np.floor(uv[:, 1].min())) - 1, 0)
         x1, y1 = min(int(np.ceil(uv[:, 0].max())) + 2, cw), min(int(np.ceil(uv[:, 1].max())) + 2, ch)
         if x1 <= x0 or y1 <= y0:
-            return None
+            return False
         w, h = x1 - x0, y1 - y0
         S = SUPERSAMPLE
         while S > 1 and w * h * S * S > MAX_SUPER_PIXELS:
@@ -327,9 +348,7 @@ class CameraRenderer:
         lit = (val * shade * (255.0 * t))[..., None] + alpha[..., None] * fog
         out = roi * (1 - alpha[..., None]) + lit
         canvas[y0:y1, x0:x1] = np.clip(out + 0.5, 0, 255).astype(np.uint8)
-        s = plate.marker_size / 2 if plate.marker_id is not None else 0.0
-        sq = np.array([[-s, s, 0], [s, s, 0], [s, -s, 0], [-s, -s, 0]]) @ T_cp[:3, :3].T + T_cp[:3, 3]
-        return self._project(sq), (x0, y0, w, h)
+        return True
 
     def _plate_shade(self, plate: Plate, H_plate: np.ndarray, roi: tuple[int, int, int, int], lam: float,
                      state: FrameState) -> np.ndarray | float:
@@ -347,22 +366,36 @@ class CameraRenderer:
         s = np.clip(0.5 + d / (2 * PENUMBRA_M), 0, 1)
         return (base + sun * (1 - self.weather.shadows * s)).astype(np.float32)
 
+    def _items(self, state: FrameState) -> list:
+        """Everything to draw, far to near: (depth, kind, data, colour); kind 0 polygon, 1 plate."""
+        items: list = []
+        self._polygon_items(inv_T(state.T_jacket_camera), state, items)
+        items.sort(key=lambda it: -it[0])
+        return items
+
+    def _square(self, plate: Plate, T_cp: np.ndarray) -> np.ndarray:
+        s = plate.marker_size / 2
+        sq = np.array([[-s, s, 0], [s, s, 0], [s, -s, 0], [-s, -s, 0]]) @ T_cp[:3, :3].T + T_cp[:3, 3]
+        return self._project(sq)
+
     def render_ideal(self, state: FrameState) -> tuple[np.ndarray, dict[int, float]]:
         """Ideal pinhole canvas and the unoccluded fraction of every marker drawn."""
-        T_cj = inv_T(state.T_jacket_camera)
         canvas = self._background(state.T_jacket_camera, state.light)
-        items: list = []
-        self._polygon_items(T_cj, state, items)
-        items.sort(key=lambda it: -it[0])
+        items = self._items(state)
         drawn: list[tuple[int, np.ndarray, int]] = []  # marker id, square polygon, item index
         for k, (_, kind, data, colour) in enumerate(items):
             if kind == 0:
                 cv2.fillPoly(canvas, [np.round(data * (1 << SHIFT)).astype(np.int32)], colour, cv2.LINE_AA, SHIFT)
-            else:
-                res = self._draw_plate(canvas, data[0], data[1], data[2], state)
-                if res is not None and data[0].marker_id is not None:
-                    drawn.append((data[0].marker_id, res[0], k))
+            elif self._draw_plate(canvas, data[0], data[1], data[2], state) and data[0].marker_id is not None:
+                drawn.append((data[0].marker_id, self._square(data[0], data[1]), k))
         return canvas, self._unoccluded(items, drawn)
+
+    def visibility(self, state: FrameState) -> dict[int, float]:
+        """Unoccluded fraction of every marker facing the camera, without drawing."""
+        items = self._items(state)
+        drawn = [(d[0].marker_id, self._square(d[0], d[1]), k) for k, (_, kind, d, _) in enumerate(items)
+                 if kind == 1 and d[0].marker_id is not None]
+        return self._unoccluded(items, drawn)
 
     def _unoccluded(self, items: list, drawn: list[tuple[int, np.ndarray, int]]) -> dict[int, float]:
         out = {}
@@ -390,7 +423,7 @@ class CameraRenderer:
 
     def finish(self, canvas: np.ndarray, state: FrameState) -> np.ndarray:
         """Distort the ideal canvas into the picture and add blur, rain and noise."""
-        img = cv2.remap(canvas, self.map1, self.map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        img = cv2.remap(canvas, *self.maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         if self.weather.motion_blur:
             img = motion_blur(img, *state.blur_px)
         if self.weather.rain > 0:
