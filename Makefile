@@ -19,7 +19,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
 
 demo: $(STAMP)
-	$(BIN)/python -m tracking.demo
+	$(BIN)/topside demo
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

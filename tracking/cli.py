@@ -262,6 +262,36 @@ def evaluate(
         markdown.write_text(markdown_table(stats, f"{offsets.name} against {truth.name}") + "\n")
 
 
+DEMO_SCENARIO = "config2-procedure5-weather"
+DEMO_DURATION_S = 20.0
+
+
+@app.command()
+def demo(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Folder for the demo's files.")] = Path("recordings"),
+    duration: Annotated[float, typer.Option(help="Seconds of the scenario to simulate.")] = DEMO_DURATION_S,
+    no_viewer: Annotated[bool, typer.Option("--no-viewer", help="Do not open the viewer at the end.")] = False,
+) -> None:
+    """Simulate configuration 2, procedure 5 in fog and rain, track it, record it, and print its accuracy."""
+    from tracking.sim.command import run_simulate
+    from viewer.playback import has_display
+
+    scene = out / "demo"
+    console.rule(f"1/3 simulate {DEMO_SCENARIO} ({duration:.0f} s)")
+    run_simulate(DEMO_SCENARIO, scene, seed=None, duration=duration)
+    console.rule("2/3 track (paper mode) and record")
+    rrd = out / "demo.rrd"
+    csv = out / "demo-offsets.csv"
+    track(rig=scene / "rig.yaml", out=csv, mode="paper", refine=Refinement.SUBPIX, rrd=rrd,
+          truth=scene / "truth.csv", rejected=False)
+    console.rule("3/3 accuracy against the simulator's truth")
+    evaluate(offsets=csv, truth=scene / "truth.csv", markdown=out / "demo-accuracy.md")
+    if not no_viewer and has_display():
+        view(recording=rrd, web=False, bind="127.0.0.1")
+    else:
+        console.print(f"open the recording with:  .venv/bin/topside view {rrd}   (or --web for a browser)")
+
+
 def main() -> None:
     """Console entry point: bad input becomes one line on stderr and exit status 2."""
     try:

@@ -11,13 +11,14 @@ import numpy as np
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetection
 
-AMBIGUITY_RATIO = 1.5  # a pose counts as unambiguous when the other IPPE solution reprojects this much worse
+AMBIGUITY_RATIO = 1.5  # a pose is unambiguous only when the other IPPE solution reprojects this much worse ...
+AMBIGUITY_GAP_PX = 0.25  # ... and worse by this much in absolute terms: below it, corner noise could swap them
 
 
 class Choice(StrEnum):
     """How the pose among the two IPPE solutions was chosen."""
 
-    UNIQUE = "unique"  # the other solution reprojects clearly worse (ratio >= AMBIGUITY_RATIO)
+    UNIQUE = "unique"  # the other solution reprojects clearly worse (by AMBIGUITY_RATIO and AMBIGUITY_GAP_PX)
     PAIR = "pair"  # ambiguous alone; chosen by agreement with the other marker of its pair
     AMBIGUOUS = "ambiguous"  # ambiguous and nothing else decided it; the lower reprojection error was kept
 
@@ -87,4 +88,6 @@ def estimate_pose(detection: MarkerDetection, camera: CameraModel, marker_size: 
         sols.append(sols[0])
     sols.sort(key=lambda s: s.reprojection_error)
     pose = MarkerPose(detection.id, detection.corners, (sols[0], sols[1]), 0, Choice.UNIQUE)
-    return pose if pose.ambiguity >= AMBIGUITY_RATIO else pose.with_choice(0, Choice.AMBIGUOUS)
+    gap = sols[1].reprojection_error - sols[0].reprojection_error
+    clear = pose.ambiguity >= AMBIGUITY_RATIO and gap >= AMBIGUITY_GAP_PX
+    return pose if clear else pose.with_choice(0, Choice.AMBIGUOUS)
