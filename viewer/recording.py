@@ -154,6 +154,19 @@ def log_estimate(rec: rr.RecordingStream, estimate: ConeEstimate) -> None:
             rr.log(f"offsets/{axis}/{estimate.cone}/estimate", rr.Scalars(float(value)), recording=rec)
 
 
+def log_topside_pose(rec: rr.RecordingStream, latest: dict[str, ConeEstimate]) -> None:
+    """T_jacket_topside from the latest cone offsets: their mean translation (rotation is not estimated yet)."""
+    full = [e.offset for e in latest.values() if np.all(np.isfinite(e.offset))]
+    if full:
+        rr.log("world/topside", rr.Transform3D(translation=np.mean(full, axis=0)), recording=rec)
+
+
+def log_frame_ages(rec: rr.RecordingStream, t: float, last_capture: dict[str, float]) -> None:
+    """Age of every camera's newest frame at capture time t, s: a stalled camera's age keeps growing."""
+    for name, t_last in last_capture.items():
+        rr.log(f"health/{name}/frame_age_s", rr.Scalars(max(0.0, t - t_last)), recording=rec)
+
+
 def log_error(rec: rr.RecordingStream, estimate: ConeEstimate, true_offset: np.ndarray) -> None:
     """Estimate minus truth of one cone at the estimate's capture time."""
     for axis, value in zip(AXES, estimate.offset - true_offset, strict=True):

@@ -20,8 +20,10 @@ from viewer.recording import (
     log_error,
     log_estimate,
     log_frame,
+    log_frame_ages,
     log_rig,
     log_series_styles,
+    log_topside_pose,
     log_truth,
 )
 
@@ -47,6 +49,7 @@ class Recorder:
         self.status = StatusBoard()
         self._truth_series = _truth_series(truth) if truth is not None else {}
         self._last_time = 0.0
+        self._last_capture: dict[str, float] = {}
         if rrd is not None:
             Path(rrd).parent.mkdir(parents=True, exist_ok=True)
             self.rec.save(rrd, default_blueprint=analysis_blueprint(rig, truth is not None))
@@ -64,6 +67,8 @@ class Recorder:
         self.status.frames[result.camera] = self.status.frames.get(result.camera, 0) + 1
         self.status.markers[result.camera] = self.status.markers.get(result.camera, 0) + len(result.poses)
         self._last_time = max(self._last_time, result.time)
+        self._last_capture[result.camera] = result.time
+        log_frame_ages(self.rec, result.time, self._last_capture)
 
     def on_estimate(self, estimate: ConeEstimate) -> None:
         """Log one cone estimate, its error against the truth, and the status panel when due."""
@@ -74,6 +79,7 @@ class Recorder:
             true = np.array([np.interp(estimate.time, times, values[:, i]) for i in range(3)])
             log_error(self.rec, estimate, true)
         self.status.latest[estimate.cone] = estimate
+        log_topside_pose(self.rec, self.status.latest)
         self.status.log_if_due(self.rec, estimate.time)
 
     def close(self) -> None:

@@ -44,6 +44,17 @@ def test_entities_and_row_counts(recorded: tuple[Path, pd.DataFrame]) -> None:
     for mid in (1, 2, 3, 4):
         assert any(p.endswith(f"/{mid}") for p in chunks if p.startswith("/world/estimated/"))
     assert "/status" in chunks and "/world/jacket/cones" in chunks
+    _, ages = component_rows(chunks["/health/cam-port/frame_age_s"], "Scalars:scalars")
+    assert len(ages) == 2 * FRAMES - 1  # at every frame of either camera once cam-port has started
+    assert max(a[0] for a in ages) == pytest.approx(1 / 30, abs=1e-3)  # cameras interleave every 1/30 s
+
+
+def test_topside_pose_follows_the_offsets(recorded: tuple[Path, pd.DataFrame]) -> None:
+    rrd, df = recorded
+    _, translations = component_rows(chunks_by_entity(rrd)["/world/topside"], "Transform3D:translation")
+    full = df.dropna(subset=["dx", "dy", "dz"])
+    assert len(translations) == len(full)
+    np.testing.assert_allclose(translations[-1][0], full[["dx", "dy", "dz"]].iloc[-1], atol=1e-5)
 
 
 def test_offsets_equal_csv(recorded: tuple[Path, pd.DataFrame]) -> None:
