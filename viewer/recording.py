@@ -76,9 +76,9 @@ def log_camera_model(rec: rr.RecordingStream, name: str, camera: CameraModel) ->
            static=True, recording=rec)
 
 
-def encode_jpeg(image: np.ndarray) -> bytes:
+def encode_jpeg(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
     """JPEG bytes of a grayscale or BGR frame."""
-    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
     if not ok:
         raise ValueError("JPEG encoding failed")
     return buf.tobytes()
@@ -103,14 +103,15 @@ def camera_pose_from_markers(rig: Rig, result: FrameResult) -> np.ndarray | None
 
 
 def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: FrameResult,
-              show_rejected: bool = False) -> None:
+              show_rejected: bool = False, jpeg_quality: int = JPEG_QUALITY) -> None:
     """One camera frame: image, corners, reprojected axes, camera pose, estimated marker frames, health."""
     name = result.camera
     set_capture_time(rec, result.time)
     rr.set_time(f"frame_{name}", sequence=result.frame.index, recording=rec)
     base = f"world/cameras/{name}"
     image = result.frame.bgr if result.frame.bgr is not None else result.frame.gray
-    rr.log(f"{base}/image", rr.EncodedImage(contents=encode_jpeg(image), media_type="image/jpeg"), recording=rec)
+    rr.log(f"{base}/image", rr.EncodedImage(contents=encode_jpeg(image, jpeg_quality), media_type="image/jpeg"),
+           recording=rec)
     markers = result.detections.markers
     rr.log(f"{base}/image/markers", rr.LineStrips2D(
         [np.vstack([m.corners, m.corners[:1]]) for m in markers],

@@ -15,6 +15,7 @@ from tracking.rig import Rig
 from viewer.blueprint import analysis_blueprint
 from viewer.recording import (
     APP_ID,
+    JPEG_QUALITY,
     StatusBoard,
     log_camera_model,
     log_error,
@@ -40,10 +41,12 @@ class Recorder:
     """Logs frames and estimates of one tracked installation into a Rerun recording."""
 
     def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
-                 show_rejected: bool = False, recording_id: str | None = None) -> None:
+                 show_rejected: bool = False, recording_id: str | None = None,
+                 jpeg_quality: int = JPEG_QUALITY) -> None:
         self.rig = rig
         self.truth = truth
         self.show_rejected = show_rejected
+        self.jpeg_quality = jpeg_quality
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
         self.cameras: dict[str, CameraModel] = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
         self.status = StatusBoard()
@@ -63,7 +66,7 @@ class Recorder:
 
     def on_frame(self, result: FrameResult) -> None:
         """Log one processed frame."""
-        log_frame(self.rec, self.rig, self.cameras[result.camera], result, self.show_rejected)
+        log_frame(self.rec, self.rig, self.cameras[result.camera], result, self.show_rejected, self.jpeg_quality)
         self.status.frames[result.camera] = self.status.frames.get(result.camera, 0) + 1
         self.status.markers[result.camera] = self.status.markers.get(result.camera, 0) + len(result.poses)
         self._last_time = max(self._last_time, result.time)
