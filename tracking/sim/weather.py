@@ -81,10 +81,6 @@ class Light:
         s = sum(np.sin(2 * np.pi * t / p + ph) for p, ph in zip(CLOUD_PERIODS, self.cloud_phase, strict=True))
         return float(1.0 + self.weather.light_variation * s / len(CLOUD_PERIODS) * 1.5)
 
-    def shade(self, normal_world: np.ndarray, level: float) -> float:
-        """Shading factor of a surface with this world normal, in full sun."""
-        return level * (AMBIENT + DIFFUSE * max(0.0, float(normal_world @ self.sun)))
-
 
 def rain_streaks(img: np.ndarray, rain: float, rng: np.random.Generator, exposure: float, fy: float,
                  wind_slant: float) -> np.ndarray:

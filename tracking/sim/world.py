@@ -9,7 +9,6 @@ from tracking.sim.motion import Motion
 from tracking.sim.render import FrameState, Segment
 from tracking.sim.scenario import CameraSpec, Scenario
 from tracking.sim.scene import (
-    VESSEL_ORIGIN,
     Body,
     attach_plates,
     jacket_body,
@@ -121,8 +120,3 @@ class World:
                    marker_size=self.scenario.marker_size,
                    cones={c: self.layout.cone_tip(c).round(6).tolist() for c in cones},
                    markers=markers, pairs=pairs, cameras=cameras)
-
-
-def vessel_origin() -> np.ndarray:
-    """Midship waterline of the vessel at rest, jacket frame."""
-    return VESSEL_ORIGIN.copy()
