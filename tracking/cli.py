@@ -233,7 +233,11 @@ def simulate(
     seed: Annotated[int | None, typer.Option(help="Random seed (default: the scenario's).")] = None,
     duration: Annotated[float | None, typer.Option(help="Cut the scenario to this many seconds.")] = None,
 ) -> None:
-    """Render a scenario: one video per camera, the rig, calibration files and the ground-truth log."""
+    """Render a scenario: one video per camera, the rig, calibration files and the ground-truth log.
+
+    Built-ins: config1-procedure1..4, config2-procedure5..7, config1-setdown, config2-setdown,
+    calibration-shots; add -weather (fog 50 %, rain 30 %) or -clear (no weather, no noise).
+    """
     from tracking.sim.command import run_simulate
 
     run_simulate(scenario, out, seed=seed, duration=duration)
