@@ -119,7 +119,7 @@ class WeatherSpec(_Model):
     noise: float = Field(1.5, ge=0, le=30)  # sensor noise standard deviation, 8-bit levels
     light_variation: float = Field(0.1, ge=0, le=0.5)  # relative swing of daylight (clouds)
     shadows: float = Field(0.5, ge=0, le=1)  # strength of moving shadow lines across plates
-    sun_azimuth: float = 200.0  # degrees from +x toward +y
+    sun_azimuth: float = 290.0  # degrees from +x (port) toward +y (astern): 290 = ahead, a little to port
     sun_elevation: float = Field(35.0, ge=-5, le=90)  # degrees
     motion_blur: bool = True
     crf: int = Field(20, ge=0, le=51)  # H.264 constant rate factor
