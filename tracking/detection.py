@@ -9,6 +9,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from tracking.camera import CameraModel
+from tracking.corners import refine_corners_batch
 from tracking.errors import InputError
 
 
@@ -19,6 +21,7 @@ class Refinement(StrEnum):
     SUBPIX = "subpix"
     CONTOUR = "contour"
     APRILTAG = "apriltag"
+    EDGES = "edges"  # OpenCV's detector with EDGES_START, then the edge fit of tracking.corners
 
 
 _CV_REFINE = {
@@ -27,6 +30,7 @@ _CV_REFINE = {
     Refinement.CONTOUR: cv2.aruco.CORNER_REFINE_CONTOUR,
     Refinement.APRILTAG: cv2.aruco.CORNER_REFINE_APRILTAG,
 }
+EDGES_START = Refinement.NONE  # OpenCV refinement that Refinement.EDGES starts from (best in benchmarks/corners.py)
 DEFAULT_REFINEMENT = Refinement.SUBPIX
 SUBPIX_WIN = 3  # px half-window for CORNER_REFINE_SUBPIX; tuned in benchmarks/corners.py
 SUBPIX_MAX_ITER = 50
@@ -76,7 +80,8 @@ def load_dictionary(name_or_path: str) -> cv2.aruco.Dictionary:
 def detector_parameters(refinement: Refinement = DEFAULT_REFINEMENT) -> cv2.aruco.DetectorParameters:
     """OpenCV detector parameters with our corner refinement."""
     params = cv2.aruco.DetectorParameters()
-    params.cornerRefinementMethod = _CV_REFINE[Refinement(refinement)]
+    refinement = Refinement(refinement)
+    params.cornerRefinementMethod = _CV_REFINE[EDGES_START if refinement == Refinement.EDGES else refinement]
     params.cornerRefinementWinSize = SUBPIX_WIN
     params.cornerRefinementMaxIterations = SUBPIX_MAX_ITER
     params.cornerRefinementMinAccuracy = SUBPIX_MIN_ACCURACY
@@ -87,9 +92,10 @@ class MarkerDetector:
     """Finds markers of one dictionary in grayscale frames."""
 
     def __init__(self, dictionary: str | cv2.aruco.Dictionary = "DICT_6X6_250",
-                 refinement: Refinement = DEFAULT_REFINEMENT) -> None:
+                 refinement: Refinement = DEFAULT_REFINEMENT, camera: CameraModel | None = None) -> None:
         self.dictionary = load_dictionary(dictionary) if isinstance(dictionary, str) else dictionary
         self.refinement = Refinement(refinement)
+        self.camera = camera  # with Refinement.EDGES, edges are fitted as straight lines in undistorted pixels
         self._detector = cv2.aruco.ArucoDetector(self.dictionary, detector_parameters(self.refinement))
 
     def detect(self, gray: np.ndarray, keep_rejected: bool = False) -> Detections:
@@ -99,8 +105,11 @@ class MarkerDetector:
         corners, ids, rejected = self._detector.detectMarkers(gray)
         markers = []
         if ids is not None:
-            for c, i in zip(corners, ids.reshape(-1), strict=True):
-                markers.append(MarkerDetection(id=int(i), corners=c.reshape(4, 2).astype(np.float64)))
+            quads = np.array([c.reshape(4, 2) for c in corners], dtype=np.float64)
+            if self.refinement == Refinement.EDGES:  # all markers of the frame in one vectorised call
+                quads, _ = refine_corners_batch(gray, quads, self.camera, self.dictionary.markerSize + 2)
+            for quad, i in zip(quads, ids.reshape(-1), strict=True):
+                markers.append(MarkerDetection(id=int(i), corners=quad))
         markers.sort(key=lambda m: m.id)
         kept = [r.reshape(4, 2).astype(np.float64) for r in rejected] if keep_rejected else []
         return Detections(markers=markers, rejected=kept)

@@ -1,0 +1,117 @@
+"""Edge-fit corner refinement against exact rendered corners, its failure modes, and the tutorial photos."""
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tests.synthetic import PAPER_K, PAPER_SIZE, PlacedMarker, render, true_corners
+from tracking.camera import CameraModel
+from tracking.corners import refine_corners, refine_corners_batch, try_refine_corners
+from tracking.detection import MarkerDetector, Refinement
+from tracking.images import read_gray
+
+# measured by benchmarks/corners.py on clean renders at 20-40 m: |bias| <= 0.005 px, RMS 0.016-0.035 px;
+# OpenCV's SUBPIX there: bias -0.25..-0.33 px
+MAX_BIAS_PX = 0.03
+MAX_RMS_PX = 0.08
+SUBPIX_MIN_INWARD_PX = 0.1
+NOISY_MAX_BIAS_PX = 0.05
+NOISY_MAX_RMS_PX = 0.15
+GOLD_TOLERANCE_PX = 2.0  # gold corners are OpenCV's integer contour corners, ~0.5 px inward of the edges
+BARREL = np.array([-0.1, 0.05, 0.0, 0.0, 0.0])
+SLOTS = [(200, 170), (700, 170), (200, 430), (700, 430)]
+PHOTOS = ["singlemarkersoriginal.jpg", "gboriginal.jpg", "choriginal.jpg", "chocclusion_original.jpg"]
+
+
+def _pose(distance: float, angle: float, u: float, v: float, roll: float) -> np.ndarray:
+    T = np.eye(4)
+    facing = cv2.Rodrigues(np.array([np.pi, 0.0, 0.0]))[0]
+    yaw = cv2.Rodrigues(np.array([0.0, np.radians(angle), 0.0]))[0]
+    T[:3, :3] = facing @ yaw @ cv2.Rodrigues(np.array([0.0, 0.0, np.radians(roll)]))[0]
+    T[:3, 3] = [(u - PAPER_K[0, 2]) / PAPER_K[0, 0] * distance, (v - PAPER_K[1, 2]) / PAPER_K[1, 1] * distance,
+                distance]
+    return T
+
+
+def _scene(distance: float, dist: np.ndarray, seed: int, noise: float = 0.0,
+           blur: float = 0.0) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """Four markers (0 and 30 degrees off the normal, random sub-pixel placement and roll) and their true corners."""
+    rng = np.random.default_rng(seed)
+    placed = []
+    for i, (u, v) in enumerate(SLOTS):
+        roll = rng.uniform(5, 40) * rng.choice([-1.0, 1.0])
+        pose = _pose(distance, 30.0 * (i % 2), u + rng.uniform(-20, 20), v + rng.uniform(-20, 20), roll)
+        placed.append(PlacedMarker(i + 1, pose, 1.0))
+    gray = render(PAPER_K, dist, PAPER_SIZE, placed, noise=noise, blur=blur, seed=seed)
+    return gray, {m.id: true_corners(PAPER_K, dist, m) for m in placed}
+
+
+def _errors(found: dict[int, np.ndarray], truth: dict[int, np.ndarray]) -> tuple[float, float]:
+    """Mean signed error along centre-to-corner (negative = inward) and RMS corner error, px."""
+    assert sorted(found) == sorted(truth)
+    signed, sq = [], []
+    for i, corners in found.items():
+        radial = truth[i] - truth[i].mean(axis=0)
+        radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+        signed.extend(np.einsum("ij,ij->i", corners - truth[i], radial))
+        sq.extend(np.sum((corners - truth[i]) ** 2, axis=1))
+    return float(np.mean(signed)), float(np.sqrt(np.mean(sq)))
+
+
+@pytest.mark.parametrize("distance", [20.0, 40.0])
+@pytest.mark.parametrize("distorted", [False, True])
+def test_edges_unbiased_on_clean_renders(distance: float, distorted: bool) -> None:
+    dist = BARREL if distorted else np.zeros(5)
+    camera = CameraModel(PAPER_K, dist, *PAPER_SIZE) if distorted else None
+    gray, truth = _scene(distance, dist, seed=int(distance) + 100 * distorted)
+    edges = MarkerDetector("DICT_6X6_250", Refinement.EDGES, camera=camera).detect(gray)
+    bias, rms = _errors({m.id: m.corners for m in edges.markers}, truth)
+    assert abs(bias) < MAX_BIAS_PX
+    assert rms < MAX_RMS_PX
+    subpix = MarkerDetector("DICT_6X6_250", Refinement.SUBPIX).detect(gray)
+    subpix_bias, _ = _errors({m.id: m.corners for m in subpix.markers}, truth)
+    assert subpix_bias < -SUBPIX_MIN_INWARD_PX  # the thresholds above would catch OpenCV's SUBPIX
+
+
+def test_edges_unbiased_on_noisy_blurred_render() -> None:
+    gray, truth = _scene(30.0, np.zeros(5), seed=7, noise=5.0, blur=0.7)
+    edges = MarkerDetector("DICT_6X6_250", Refinement.EDGES).detect(gray)
+    bias, rms = _errors({m.id: m.corners for m in edges.markers}, truth)
+    assert abs(bias) < NOISY_MAX_BIAS_PX
+    assert rms < NOISY_MAX_RMS_PX
+
+
+def test_fails_gracefully() -> None:
+    gray, truth = _scene(20.0, np.zeros(5), seed=3)
+    start = truth[1] + np.array([[0.4, 0.3], [-0.3, 0.4], [-0.4, -0.3], [0.3, -0.4]])  # about 0.5 px inward
+    flat = np.full_like(gray, 128)
+    assert try_refine_corners(flat, start) is None
+    np.testing.assert_array_equal(refine_corners(flat, start), start)
+    occluded = gray.copy()
+    x0, y0 = np.floor(truth[1].min(axis=0)).astype(int) - 5
+    x1, y1 = np.ceil(truth[1].max(axis=0)).astype(int) + 5
+    occluded[y0:y1, (x0 + x1) // 2:x1] = 90  # right half of the marker covered by background
+    np.testing.assert_array_equal(refine_corners(occluded, start), start)
+    nan = start.copy()
+    nan[2, 0] = np.nan
+    quads = np.stack([start, nan, truth[2]])
+    refined, ok = refine_corners_batch(gray, quads)
+    assert ok.tolist() == [True, False, True]
+    np.testing.assert_array_equal(refined[1], nan)
+    assert np.abs(refined[0] - truth[1]).max() < MAX_RMS_PX
+    assert refine_corners_batch(gray, np.zeros((0, 4, 2)))[0].shape == (0, 4, 2)
+
+
+@pytest.mark.parametrize("photo", PHOTOS)
+def test_edges_keeps_gold_ids(shared_data: Path, photo: str) -> None:
+    folder = shared_data / "aruco/opencv-tutorial"
+    entry = json.loads((folder / "gold_corners.json").read_text())[photo]
+    dictionary = entry["dictionary"] if entry["dictionary"].startswith("DICT_") else str(folder / entry["dictionary"])
+    gold = {int(k): np.array(v, dtype=float) for k, v in entry["markers"].items()}
+    found = MarkerDetector(dictionary, Refinement.EDGES).detect(read_gray(folder / photo))
+    assert sorted(found.ids) == sorted(gold)
+    for m in found.markers:
+        assert np.abs(m.corners - gold[m.id]).max() <= GOLD_TOLERANCE_PX

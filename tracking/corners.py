@@ -1,0 +1,258 @@
+"""Unbiased sub-pixel marker corners from the four outer edges of the black square.
+
+Each outer edge (black border against the white quiet zone) is sampled with short intensity
+profiles across it. On each profile the edge is placed where the area under the normalised
+profile says it is (the "area" or first-moment edge: exact for a pixel-integrated step under any
+symmetric blur, independent of the blur width), with the black and white levels read locally at
+the middle of the border cell and of the quiet-zone cell. A robust straight line is fitted to each
+edge and adjacent lines are intersected. With a camera model the sample positions are laid out in
+undistorted (ideal) pixels, where the edges are straight, and only the image look-ups are distorted;
+the corners are re-distorted at the end. Every step is vectorised over the edges of all markers of a frame.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from tracking.camera import CameraModel
+
+DEFAULT_CELLS = 8  # cells across the black square: markerSize + 2 border cells (DICT_6X6_*)
+ITERATIONS = 2  # one coarse pass, then fine passes re-centred on the previous lines (more do not help)
+COARSE_REACH = 0.9  # the coarse pass looks this many cells either side of the start edge ...
+COARSE_MAX_PX = 4.0  # ... but never further than this
+MIN_GRADIENT = 3.0  # grey levels per pixel: weakest step the coarse pass accepts
+LEVEL_AT = 0.5  # black / white levels are read this many cells inside / outside the edge
+LEVEL_MAX_PX = 4.0  # ... but never further than this from the edge (large markers)
+HALF_WINDOW = 0.42  # integration half-width across the edge, in cells
+HALF_WINDOW_MAX_PX = 3.0  # ... capped for large markers (wider windows only add noise)
+HALF_WINDOW_MIN_PX = 0.75
+PROFILE_STEP_PX = 0.5  # spacing of the samples across the edge
+SAMPLE_SPACING_PX = 1.0  # spacing of the profiles along the edge
+MAX_PROFILES = 24  # profiles per edge at most (large markers)
+MIN_PROFILES = 4
+END_MARGIN = 0.9  # profiles keep this many cells away from the corners ...
+END_MARGIN_MIN_PX = 1.5  # ... and at least this many pixels
+MIN_CONTRAST = 12.0  # grey levels between the local black and white levels for a usable profile
+MIN_INLIER_FRACTION = 0.5  # an edge with fewer usable, consistent profiles fails
+TUKEY_C = 4.685  # Tukey biweight constant, in robust sigmas
+MIN_SIGMA_PX = 0.02  # floor of the robust residual scale
+ROBUST_ITERATIONS = 3  # least squares, then Tukey-reweighted fits
+MAX_SHIFT_PX = 2.5  # a corner moving further than this from its input is a failure ...
+MAX_SHIFT_CELLS = 0.6  # ... unless it stays within this many cells (large markers)
+CONVERGED_PX = 0.002  # stop early when no corner moved more than this in a fine pass
+MIN_SIN_ANGLE = 0.2  # adjacent edges closer to parallel than this cannot be intersected
+PROJECT_ZERO = np.zeros(3)
+RATIONAL_SIZE = 8  # k1 k2 p1 p2 k3 k4 k5 k6: distortion evaluated here; longer models go to cv2.projectPoints
+
+
+def _distort(camera: CameraModel, ideal: np.ndarray) -> np.ndarray:
+    """Ideal pixels (..., 2) of camera.K to distorted pixels (..., 2) (OpenCV's model)."""
+    K, dist = camera.K, np.asarray(camera.dist, dtype=np.float64).reshape(-1)
+    x = (ideal[..., 0] - K[0, 2]) / K[0, 0]
+    y = (ideal[..., 1] - K[1, 2]) / K[1, 1]
+    if dist.size > RATIONAL_SIZE:  # thin prism / tilted sensor: let OpenCV do it
+        rays = np.stack([x.reshape(-1), y.reshape(-1), np.ones(x.size)], axis=1)
+        px, _ = cv2.projectPoints(rays, PROJECT_ZERO, PROJECT_ZERO, K, dist)
+        return px.reshape(ideal.shape)
+    k = np.zeros(RATIONAL_SIZE)
+    k[:dist.size] = dist
+    k1, k2, p1, p2, k3, k4, k5, k6 = k
+    r2 = x * x + y * y
+    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    xy = x * y
+    xd = x * radial + 2 * p1 * xy + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * xy
+    return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
+
+
+def _bilinear(gray: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bilinear intensities at pts (..., 2) and a mask of the points inside the image."""
+    h, w = gray.shape
+    x, y = pts[..., 0], pts[..., 1]
+    inside = (x >= 0) & (y >= 0) & (x <= w - 1) & (y <= h - 1)
+    x = np.clip(x, 0, w - 1.000001)
+    y = np.clip(y, 0, h - 1.000001)
+    x0 = x.astype(np.intp)
+    y0 = y.astype(np.intp)
+    fx, fy = x - x0, y - y0
+    flat = gray.reshape(-1)
+    i = y0 * w + x0
+    a, b = flat[i].astype(np.float64), flat[i + 1].astype(np.float64)
+    c, d = flat[i + w].astype(np.float64), flat[i + w + 1].astype(np.float64)
+    top = a + (b - a) * fx
+    bottom = c + (d - c) * fx
+    return top + (bottom - top) * fy, inside
+
+
+def _intersect(p: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Corners (B, 4, 2) where line k-1 meets line k (p point, u unit direction), and |sin| of their angle."""
+    p0, u0 = np.roll(p, 1, axis=1), np.roll(u, 1, axis=1)
+    cross = u0[..., 0] * u[..., 1] - u0[..., 1] * u[..., 0]
+    dp = p - p0
+    safe = np.where(np.abs(cross) < 1e-12, 1e-12, cross)
+    t = (dp[..., 0] * u[..., 1] - dp[..., 1] * u[..., 0]) / safe
+    return p0 + t[..., None] * u0, np.abs(cross)
+
+
+def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, cells: int,
+               coarse: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One pass over quads (B, 4, 2): robust lines (point, unit direction) through their edges, and which fitted.
+
+    The coarse pass puts each edge at the strongest dark-to-bright step within most of a cell either
+    side (robust to a start a pixel off); the fine passes use the unbiased area edge.
+    """
+    start, end = ideal, np.roll(ideal, -1, axis=1)
+    along = end - start
+    length = np.linalg.norm(along, axis=2)  # (B, 4)
+    usable = length > 2 * END_MARGIN_MIN_PX + MIN_PROFILES * SAMPLE_SPACING_PX
+    u = along / np.maximum(length, 1e-9)[..., None]
+    normal = np.stack([u[..., 1], -u[..., 0]], axis=2)
+    outward = np.sign(np.einsum("bij,bij->bi", (start + end) / 2 - ideal.mean(axis=1, keepdims=True), normal))
+    normal *= np.where(outward == 0, 1.0, outward)[..., None]
+    # interior angle at corner k, between edge k (leaving it) and edge k-1 (arriving)
+    back = -np.roll(u, 1, axis=1)
+    sin_c = np.abs(u[..., 0] * back[..., 1] - u[..., 1] * back[..., 0])
+    cos_c = np.maximum(np.einsum("bij,bij->bi", u, back), 0.0)
+    usable &= (sin_c > MIN_SIN_ANGLE) & (np.roll(sin_c, -1, axis=1) > MIN_SIN_ANGLE)
+    sin_c = np.maximum(sin_c, MIN_SIN_ANGLE)
+    # cell thickness across edge k: the neighbouring edges' lengths times their sine with edge k
+    cell_across = (np.roll(length, 1, axis=1) * sin_c + np.roll(length * sin_c, -1, axis=1)) / (2 * cells)
+    if coarse:
+        half = np.clip(COARSE_REACH * cell_across, HALF_WINDOW_MIN_PX, COARSE_MAX_PX)
+        level = half
+    else:
+        half = np.clip(HALF_WINDOW * cell_across, HALF_WINDOW_MIN_PX, HALF_WINDOW_MAX_PX)
+        level = np.minimum(LEVEL_AT * cell_across, LEVEL_MAX_PX)
+    # keep the profiles clear of the neighbouring edges: wider margins at acute corners
+    wedge = level * (1 + cos_c) / sin_c
+    floor = np.maximum(END_MARGIN * length / cells, END_MARGIN_MIN_PX)
+    m_start = np.maximum(floor, wedge)
+    m_end = np.maximum(floor, np.roll(wedge, -1, axis=1))
+    span = length - m_start - m_end
+    usable &= span > MIN_PROFILES * SAMPLE_SPACING_PX / 2
+    span = np.maximum(span, 0.0)
+    n_prof = int(np.clip(np.max(span) / SAMPLE_SPACING_PX, MIN_PROFILES, MAX_PROFILES))
+    s = m_start[..., None] + span[..., None] * ((np.arange(n_prof) + 0.5) / n_prof)  # (B, 4, N) along the edge
+    n_off = int(np.ceil(np.max(half) / PROFILE_STEP_PX))
+    step = half / n_off  # (B, 4) sample spacing across each edge
+    d = half[..., None] * (np.arange(-n_off, n_off + 1) / n_off)  # (B, 4, M)
+    offsets = d if coarse else np.concatenate([-level[..., None], d, level[..., None]], axis=2)
+    pts = (start[:, :, None, None, :] + s[..., None, None] * u[:, :, None, None, :]
+           + offsets[:, :, None, :, None] * normal[:, :, None, None, :])  # (B, 4, N, M', 2)
+    values, inside = _bilinear(gray, _distort(camera, pts) if camera is not None else pts)
+    ok = inside.all(axis=3)
+    if coarse:
+        e, found = _gradient_edge(values, step)
+    else:
+        e, found = _area_edge(values, half, step)
+        found &= np.abs(e) < half[..., None]
+    b_count = len(ideal)
+    a, b, fitted = _robust_lines(s.reshape(b_count * 4, -1), e.reshape(b_count * 4, -1),
+                                 (ok & found).reshape(b_count * 4, -1))
+    a, b = a.reshape(b_count, 4), b.reshape(b_count, 4)
+    p = start + a[..., None] * normal
+    direction = u + b[..., None] * normal
+    direction /= np.maximum(np.linalg.norm(direction, axis=2, keepdims=True), 1e-12)
+    return p, direction, (usable & fitted.reshape(b_count, 4)).all(axis=1)
+
+
+def _gradient_edge(values: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets (B, 4, N) of the strongest rising step in profiles (B, 4, N, M) centred on 0, and where found."""
+    m = values.shape[-1]
+    grad = np.diff(values, axis=-1) / step[..., None, None]  # (B, 4, N, M-1) at half-sample positions
+    k = np.argmax(grad, axis=-1)[..., None]
+    g0 = np.take_along_axis(grad, np.maximum(k - 1, 0), axis=-1)[..., 0]
+    g1 = np.take_along_axis(grad, k, axis=-1)[..., 0]
+    g2 = np.take_along_axis(grad, np.minimum(k + 1, m - 2), axis=-1)[..., 0]
+    curvature = g0 - 2 * g1 + g2
+    peaked = curvature < 0
+    delta = np.clip(np.where(peaked, 0.5 * (g0 - g2) / np.where(peaked, curvature, -1.0), 0.0), -0.5, 0.5)
+    return (k[..., 0] + 0.5 + delta - (m - 1) / 2) * step[..., None], g1 > MIN_GRADIENT
+
+
+def _smooth(v: np.ndarray) -> np.ndarray:
+    """[1 2 1] / 4 smoothing along the last axis, with replicated ends."""
+    padded = np.concatenate([v[..., :1], v, v[..., -1:]], axis=-1)
+    return 0.25 * padded[..., :-2] + 0.5 * padded[..., 1:-1] + 0.25 * padded[..., 2:]
+
+
+def _area_edge(values: np.ndarray, half: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Area edge offsets (B, 4, N) from [black, profile..., white] samples (B, 4, N, M+2), and which are usable."""
+    black, white, prof = _smooth(values[..., 0]), _smooth(values[..., -1]), values[..., 1:-1]
+    contrast = white - black
+    found = contrast > MIN_CONTRAST
+    norm = (prof - black[..., None]) / np.where(found, contrast, 1.0)[..., None]
+    area = step[..., None] * (norm.sum(axis=-1) - 0.5 * (norm[..., 0] + norm[..., -1]))
+    return half[..., None] - area, found
+
+
+def _masked_median(v: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Median of each row of v (R, N) over the entries where ok (inf for rows with none)."""
+    count = ok.sum(axis=1)
+    ordered = np.sort(np.where(ok, v, np.inf), axis=1)
+    lo = np.take_along_axis(ordered, np.maximum((count - 1) // 2, 0)[:, None], axis=1)[:, 0]
+    hi = np.take_along_axis(ordered, np.maximum(count // 2, 0)[:, None], axis=1)[:, 0]
+    return 0.5 * (lo + hi)
+
+
+def _robust_lines(s: np.ndarray, e: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tukey-weighted fits e = a + b s per row of (R, N): a, b and whether enough profiles agree."""
+    need = max(MIN_PROFILES, MIN_INLIER_FRACTION * s.shape[1])
+    w = ok.astype(np.float64)
+    e = np.where(ok, e, 0.0)
+    a = b = np.zeros(len(s))
+    for i in range(ROBUST_ITERATIONS):
+        sw = np.maximum(w.sum(axis=1), 1e-12)
+        ms = (w * s).sum(axis=1) / sw
+        me = (w * e).sum(axis=1) / sw
+        ds = s - ms[:, None]
+        b = (w * ds * (e - me[:, None])).sum(axis=1) / np.maximum((w * ds * ds).sum(axis=1), 1e-12)
+        a = me - b * ms
+        if i == ROBUST_ITERATIONS - 1:
+            break
+        r = e - a[:, None] - b[:, None] * s
+        sigma = np.maximum(1.4826 * _masked_median(np.abs(r), ok), MIN_SIGMA_PX)
+        z = r / (TUKEY_C * np.where(np.isfinite(sigma), sigma, 1.0)[:, None])
+        w = np.where(ok & (np.abs(z) < 1), (1 - z * z) ** 2, 0.0)
+    return a, b, (w > 0).sum(axis=1) >= need
+
+
+def refine_corners_batch(gray: np.ndarray, quads: np.ndarray, camera: CameraModel | None = None,
+                         cells: int = DEFAULT_CELLS) -> tuple[np.ndarray, np.ndarray]:
+    """Refined corners (B, 4, 2) of quads (B, 4, 2) in distorted pixels, and which succeeded (others kept as given)."""
+    quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
+    count = len(quads)
+    ok = np.all(np.isfinite(quads), axis=(1, 2))
+    if count == 0 or gray.ndim != 2 or not ok.any():
+        return quads.copy(), np.zeros(count, dtype=bool)
+    gray = np.ascontiguousarray(gray)
+    start = np.where(ok[:, None, None], quads, 0.0)
+    ideal = camera.undistort_points(start.reshape(-1, 2)).reshape(count, 4, 2) if camera is not None else start
+    for i in range(ITERATIONS):
+        p, u, fitted = _fit_edges(gray, ideal, camera, cells, coarse=i == 0)
+        corners, sin_angle = _intersect(p, u)
+        fitted &= np.all(sin_angle > MIN_SIN_ANGLE, axis=1) & np.all(np.isfinite(corners), axis=(1, 2))
+        ok &= fitted
+        moved = np.abs(corners - ideal).max(axis=(1, 2))
+        ideal = np.where(ok[:, None, None], corners, ideal)
+        if i > 0 and not np.any(ok & (moved > CONVERGED_PX)):
+            break
+    refined = _distort(camera, ideal) if camera is not None else ideal
+    cell = np.linalg.norm(np.diff(start, axis=1, append=start[:, :1]), axis=2).mean(axis=1) / cells
+    limit = np.maximum(MAX_SHIFT_PX, MAX_SHIFT_CELLS * cell)
+    ok &= np.all(np.isfinite(refined), axis=(1, 2)) & (np.linalg.norm(refined - quads, axis=2).max(axis=1) <= limit)
+    return np.where(ok[:, None, None], refined, quads), ok
+
+
+def try_refine_corners(gray: np.ndarray, corners: np.ndarray, camera: CameraModel | None = None,
+                       cells: int = DEFAULT_CELLS) -> np.ndarray | None:
+    """Refined corners (4, 2) in distorted pixels, TL TR BR BL, or None when an edge cannot be fitted."""
+    refined, ok = refine_corners_batch(gray, np.asarray(corners).reshape(1, 4, 2), camera, cells)
+    return refined[0] if ok[0] else None
+
+
+def refine_corners(gray: np.ndarray, corners: np.ndarray, camera: CameraModel | None = None,
+                   cells: int = DEFAULT_CELLS) -> np.ndarray:
+    """Refined corners (4, 2) in distorted pixels, or the input corners unchanged when a fit fails."""
+    return refine_corners_batch(gray, np.asarray(corners).reshape(1, 4, 2), camera, cells)[0][0]
