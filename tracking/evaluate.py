@@ -58,15 +58,18 @@ def truth_at(truth: pd.DataFrame, cone: str, times: np.ndarray, kind: str = "con
 
 
 def errors(offsets: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
-    """Per row of the offsets: time, cone, and the error per axis (estimate minus truth)."""
+    """Per row of the offsets: time, cone, error per axis (estimate minus truth), cameras; grouped by cone."""
     parts = []
     t_lo, t_hi = truth["time"].min(), truth["time"].max()
     for cone, rows in offsets.groupby("cone", sort=True):
         rows = rows[(rows["time"] >= t_lo) & (rows["time"] <= t_hi)]
         true = truth_at(truth, str(cone), rows["time"].to_numpy())
         err = rows[list(AXES)].to_numpy() - true
-        parts.append(pd.DataFrame({"time": rows["time"].to_numpy(), "cone": cone,
-                                   **{f"e{a[1]}": err[:, i] for i, a in enumerate(AXES)}}))
+        part = pd.DataFrame({"time": rows["time"].to_numpy(), "cone": cone,
+                             **{f"e{a[1]}": err[:, i] for i, a in enumerate(AXES)}})
+        if "cameras" in rows.columns:
+            part["cameras"] = rows["cameras"].to_numpy()
+        parts.append(part)
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=["time", "cone", "ex", "ey", "ez"])
 
 
