@@ -3,11 +3,18 @@
 Each outer edge (black border against the white quiet zone) is sampled with short intensity
 profiles across it. On each profile the edge is placed where the area under the normalised
 profile says it is (the "area" or first-moment edge: exact for a pixel-integrated step under any
-symmetric blur, independent of the blur width), with the black and white levels read locally at
-the middle of the border cell and of the quiet-zone cell. A robust straight line is fitted to each
-edge and adjacent lines are intersected. With a camera model the sample positions are laid out in
-undistorted (ideal) pixels, where the edges are straight, and only the image look-ups are distorted;
-the corners are re-distorted at the end. Every step is vectorised over the edges of all markers of a frame.
+symmetric blur whose transition fits in the window), with the black and white levels read locally
+at the middle of the border cell and of the quiet-zone cell. A coarse pass first re-centres the
+profiles on the strongest dark-to-bright step (starts a pixel or two off are fine). A robust
+straight line is fitted to each edge and adjacent lines are intersected. With a camera model the
+sample positions are laid out in undistorted (ideal) pixels, where the edges are straight, and only
+the image look-ups are distorted; the corners are re-distorted at the end. Every step is vectorised
+over the edges of all markers of a frame.
+
+It needs the marker's white quiet zone (one cell at least); where an edge cannot be fitted
+(occlusion, no contrast, a corner moving too far) the marker keeps its input corners. Accuracy drops
+where a cell is under ~2 px thick across an edge (60 degrees off the normal beyond ~35 m): see
+benchmarks/corners.py.
 """
 
 from __future__ import annotations
