@@ -34,9 +34,9 @@ AXIS_LENGTH_M = 0.5
 FRUSTUM_DEPTH_M = 2.0
 AXES = ("dx", "dy", "dz")
 AXIS_COLORS = [(230, 60, 60), (60, 200, 60), (60, 120, 240)]
+CONE_COLORS = [(255, 140, 0), (0, 170, 255), (200, 80, 255), (80, 220, 120), (255, 220, 0), (255, 90, 150)]
 JACKET_COLOR = (255, 170, 0)
 TOPSIDE_COLOR = (0, 200, 255)
-TRUTH_COLOR = (160, 160, 160)
 REJECTED_COLOR = (200, 0, 200)
 CHOICE_COLORS = {Choice.UNIQUE: (0, 255, 0), Choice.PAIR: (255, 255, 0), Choice.AMBIGUOUS: (255, 64, 0)}
 STATUS_PERIOD_S = 1.0
@@ -109,6 +109,7 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
     set_capture_time(rec, result.time)
     rr.set_time(f"frame_{name}", sequence=result.frame.index, recording=rec)
     base = f"world/cameras/{name}"
+    rr.log(f"world/estimated/{name}", rr.Clear(recursive=True), recording=rec)  # no stale marker frames
     image = result.frame.bgr if result.frame.bgr is not None else result.frame.gray
     rr.log(f"{base}/image", rr.EncodedImage(contents=encode_jpeg(image, jpeg_quality), media_type="image/jpeg"),
            recording=rec)
@@ -192,16 +193,22 @@ def log_truth(rec: rr.RecordingStream, truth: pd.DataFrame, cones: Iterable[str]
                             columns=rr.Scalars.columns(scalars=np.full(times.size, sign * TOLERANCE_M)), recording=rec)
 
 
+def cone_color(index: int, lighten: float = 0.0) -> tuple[int, int, int]:
+    """The colour of the index-th cone, optionally lightened towards white (0..1) for its truth."""
+    c = np.array(CONE_COLORS[index % len(CONE_COLORS)], dtype=float)
+    return tuple(int(v) for v in c + (255 - c) * lighten)
+
+
 def log_series_styles(rec: rr.RecordingStream, cones: Iterable[str], with_truth: bool) -> None:
-    """Static names and colours of every time series."""
-    for cone in cones:
-        for i, axis in enumerate(AXES):
-            rr.log(f"offsets/{axis}/{cone}/estimate", rr.SeriesLines(colors=AXIS_COLORS[i], names=f"{cone} estimate",
+    """Static names and colours of every time series: a colour per cone, its truth a lighter shade."""
+    for k, cone in enumerate(cones):
+        for axis in AXES:
+            rr.log(f"offsets/{axis}/{cone}/estimate", rr.SeriesLines(colors=cone_color(k), names=f"{cone} estimate",
                                                                      widths=2.0), static=True, recording=rec)
             if with_truth:
-                rr.log(f"offsets/{axis}/{cone}/truth", rr.SeriesLines(colors=TRUTH_COLOR, names=f"{cone} truth",
+                rr.log(f"offsets/{axis}/{cone}/truth", rr.SeriesLines(colors=cone_color(k, 0.6), names=f"{cone} truth",
                                                                       widths=1.0), static=True, recording=rec)
-                rr.log(f"errors/{axis}/{cone}", rr.SeriesLines(colors=AXIS_COLORS[i], names=f"{cone} error"),
+                rr.log(f"errors/{axis}/{cone}", rr.SeriesLines(colors=cone_color(k), names=f"{cone} error"),
                        static=True, recording=rec)
     for axis in AXES:
         for label in ("upper", "lower"):
