@@ -13,7 +13,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-from tracking.detection import Refinement
+from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import EXIT_BAD_INPUT, InputError
 
 app = typer.Typer(
@@ -83,7 +83,7 @@ def detect(
     rig: Annotated[Path | None, typer.Option(help="Rig file: its dictionary, marker size and ids.")] = None,
     camera: Annotated[Path | None, typer.Option(help="Camera file: also estimate every marker's pose.")] = None,
     marker_size: Annotated[float | None, typer.Option(help="Marker edge in m (default: the rig's, or 1.0).")] = None,
-    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = Refinement.SUBPIX,
+    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = DEFAULT_REFINEMENT,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per frame.")] = False,
 ) -> None:
     """Print the markers found in every frame: ids, corners (TL TR BR BL) and, given a camera, poses."""
@@ -98,8 +98,8 @@ def detect(
     the_rig = load_rig(rig) if rig else None
     if dictionary and the_rig and dictionary != the_rig.dictionary:
         raise InputError("--dictionary", f"{dictionary} differs from the rig's {the_rig.dictionary}")
-    detector = MarkerDetector(dictionary or (the_rig.dictionary if the_rig else "DICT_6X6_250"), refine)
     cam = load_camera(camera) if camera else None
+    detector = MarkerDetector(dictionary or (the_rig.dictionary if the_rig else "DICT_6X6_250"), refine, cam)
     size = marker_size or (the_rig.marker_size if the_rig else 1.0)
     known = the_rig.marker_by_id if the_rig else None
     unknown: Counter[int] = Counter()
@@ -149,7 +149,7 @@ def track(
     rig: Annotated[Path, typer.Option(help="Rig file of the installation.")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Offsets CSV to write.")] = Path("offsets.csv"),
     mode: Annotated[str, typer.Option(help="raw: every camera's pair offset; paper: the paper's method.")] = "raw",
-    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = Refinement.SUBPIX,
+    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = DEFAULT_REFINEMENT,
     rrd: Annotated[Path | None, typer.Option(help="Also record everything to this Rerun file (.rrd).")] = None,
     truth: Annotated[Path | None, typer.Option(help="Ground-truth log to overlay in the recording.")] = None,
     rejected: Annotated[bool, typer.Option("--rejected", help="Record rejected marker candidates too.")] = False,
@@ -286,7 +286,7 @@ def demo(
     console.rule("2/3 track (paper mode) and record")
     rrd = out / "demo.rrd"
     csv = out / "demo-offsets.csv"
-    track(rig=scene / "rig.yaml", out=csv, mode="paper", refine=Refinement.SUBPIX, rrd=rrd,
+    track(rig=scene / "rig.yaml", out=csv, mode="paper", refine=DEFAULT_REFINEMENT, rrd=rrd,
           truth=scene / "truth.csv", rejected=False)
     console.rule("3/3 accuracy against the simulator's truth")
     evaluate(offsets=csv, truth=scene / "truth.csv", markdown=out / "demo-accuracy.md")

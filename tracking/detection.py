@@ -31,7 +31,8 @@ _CV_REFINE = {
     Refinement.APRILTAG: cv2.aruco.CORNER_REFINE_APRILTAG,
 }
 EDGES_START = Refinement.NONE  # OpenCV refinement that Refinement.EDGES starts from (best in benchmarks/corners.py)
-DEFAULT_REFINEMENT = Refinement.SUBPIX
+DEFAULT_REFINEMENT = Refinement.EDGES  # unbiased: benchmarks/results/corners.md
+RAIN_FILTER_PX = 5  # grey opening that erases bright streaks thinner than this before a second detection pass
 SUBPIX_WIN = 3  # px half-window for CORNER_REFINE_SUBPIX; tuned in benchmarks/corners.py
 SUBPIX_MAX_ITER = 50
 SUBPIX_MIN_ACCURACY = 0.01  # px
@@ -92,17 +93,35 @@ class MarkerDetector:
     """Finds markers of one dictionary in grayscale frames."""
 
     def __init__(self, dictionary: str | cv2.aruco.Dictionary = "DICT_6X6_250",
-                 refinement: Refinement = DEFAULT_REFINEMENT, camera: CameraModel | None = None) -> None:
+                 refinement: Refinement = DEFAULT_REFINEMENT, camera: CameraModel | None = None,
+                 rain_filter: int = RAIN_FILTER_PX) -> None:
         self.dictionary = load_dictionary(dictionary) if isinstance(dictionary, str) else dictionary
         self.refinement = Refinement(refinement)
         self.camera = camera  # with Refinement.EDGES, edges are fitted as straight lines in undistorted pixels
+        self.rain_filter = rain_filter  # 0 switches the second pass off
         self._detector = cv2.aruco.ArucoDetector(self.dictionary, detector_parameters(self.refinement))
+        self._kernel = np.ones((rain_filter, rain_filter), np.uint8) if rain_filter > 1 else None
+
+    def _find(self, gray: np.ndarray) -> tuple[list[np.ndarray], np.ndarray | None, list[np.ndarray]]:
+        """Quads and ids: the plain pass, plus markers only the rain-filtered pass finds (rain cuts borders)."""
+        corners, ids, rejected = self._detector.detectMarkers(gray)
+        if self._kernel is None:
+            return list(corners), ids, list(rejected)
+        corners2, ids2, _ = self._detector.detectMarkers(cv2.morphologyEx(gray, cv2.MORPH_OPEN, self._kernel))
+        if ids2 is None:
+            return list(corners), ids, list(rejected)
+        seen = set() if ids is None else set(ids.reshape(-1).tolist())
+        extra = [(c, i) for c, i in zip(corners2, ids2.reshape(-1), strict=True) if int(i) not in seen]
+        if not extra:
+            return list(corners), ids, list(rejected)
+        all_ids = np.concatenate([ids.reshape(-1) if ids is not None else np.zeros(0, int), [i for _, i in extra]])
+        return list(corners) + [c for c, _ in extra], all_ids.reshape(-1, 1), list(rejected)
 
     def detect(self, gray: np.ndarray, keep_rejected: bool = False) -> Detections:
         """Markers in one grayscale (H, W) uint8 frame."""
         if gray.ndim == 3:
             gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
-        corners, ids, rejected = self._detector.detectMarkers(gray)
+        corners, ids, rejected = self._find(gray)
         markers = []
         if ids is not None:
             quads = np.array([c.reshape(4, 2) for c in corners], dtype=np.float64)

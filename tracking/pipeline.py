@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from tracking.camera import CameraModel, load_camera
-from tracking.detection import Detections, MarkerDetector, Refinement
+from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetector, Refinement
 from tracking.errors import InputError
 from tracking.images import Frame, frames
 from tracking.offsets import PairOffset, frame_offsets
@@ -67,8 +67,8 @@ class CameraTracker:
     def from_rig(cls, rig: Rig, entry: CameraEntry, refinement: Refinement, keep_color: bool = False
                  ) -> CameraTracker:
         """Load the camera's calibration and build its detector."""
-        return cls(rig, entry, load_camera(rig.resolve(entry.calibration)),
-                   MarkerDetector(rig.dictionary, refinement), keep_color)
+        camera = load_camera(rig.resolve(entry.calibration))
+        return cls(rig, entry, camera, MarkerDetector(rig.dictionary, refinement, camera), keep_color)
 
     def process(self, frame: Frame) -> FrameResult:
         """Detect, estimate poses and the pair offsets of one frame."""
@@ -92,7 +92,7 @@ class CameraTracker:
             yield self.process(frame)
 
 
-def track_rig(rig: Rig, refinement: Refinement = Refinement.SUBPIX, cameras: list[str] | None = None,
+def track_rig(rig: Rig, refinement: Refinement = DEFAULT_REFINEMENT, cameras: list[str] | None = None,
               keep_color: bool = False, on_frame: Callable[[FrameResult], None] | None = None
               ) -> Iterator[FrameResult]:
     """All cameras of a rig, merged into one stream ordered by capture time."""
