@@ -19,7 +19,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from tracking.errors import InputError
+from tracking.errors import InputError, read_yaml
 
 Body = Literal["jacket", "topside"]
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
@@ -206,12 +206,7 @@ def load_rig(path: str | Path) -> Rig:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "rig file not found")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark else "YAML"
-        raise InputError(path, f"not valid YAML ({getattr(exc, 'problem', exc)})", where) from None
+    data = read_yaml(path)
     if not isinstance(data, dict):
         raise InputError(path, "expected a mapping with dictionary, marker_size, markers, cameras")
     try:

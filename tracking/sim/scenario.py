@@ -17,7 +17,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from tracking.errors import InputError
+from tracking.errors import InputError, read_yaml
 from tracking.rig import FACE_NORMALS
 from tracking.sim.scene import CONES, Layout
 
@@ -234,12 +234,7 @@ def load_scenario(scenario: str | Path) -> Scenario:
             return builtin_scenario(name)
         raise InputError(path, "no such file and no such built-in scenario "
                          f"(built-ins: {', '.join(builtin_names())})")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark else "YAML"
-        raise InputError(path, f"not valid YAML ({getattr(exc, 'problem', exc)})", where) from None
+    data = read_yaml(path)
     if isinstance(data, dict) and "base" in data:
         base_name = data.pop("base")
         base = builtin_scenario(str(base_name), missing_ok=True)
