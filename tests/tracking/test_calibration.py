@@ -27,7 +27,7 @@ def test_opencv_test_calibration_flags_0(left_photos: list[Path]) -> None:
 
 
 def test_calibration_sample_fix_aspect(left_photos: list[Path]) -> None:
-    # OpenCV's samples/cpp/calibration.cpp refines with an 11x11 window, which gives left_intrinsics.yml
+    # OpenCV's samples/cpp/calibration.cpp refines with half-size 11 (23x23), which gives left_intrinsics.yml
     r = calibrate(left_photos, parse_board("chessboard:9x6:0.025"), fix_aspect=True, subpix_window=11)
     assert r.camera.K[0, 0] == r.camera.K[1, 1]
     assert r.camera.K[0, 0] == pytest.approx(535.9, abs=2)
