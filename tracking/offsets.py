@@ -66,18 +66,33 @@ def _weaker(a: Choice, b: Choice) -> Choice:
     return max(a, b, key=order.index)
 
 
-def pair_offset(rig: Rig, pair: Pair, W: MarkerPose, S: MarkerPose, camera: str, time: float) -> PairOffset:
+@dataclass(frozen=True)
+class PairGeometry:
+    """What the rig fixes about one pair, computed once: its nominal mated pose and the jacket marker's axes."""
+
+    pair: Pair
+    T_W_S_mated: np.ndarray  # (4, 4) topside marker in the jacket marker's frame when mated
+    R_jacket_W: np.ndarray  # (3, 3) jacket marker axes in the jacket frame
+
+
+def pair_geometries(rig: Rig) -> list[PairGeometry]:
+    """The geometry of every pair of the rig."""
+    by_id = rig.marker_by_id
+    return [PairGeometry(p, rig.T_W_S_mated(p), by_id[p.jacket].T_body_marker[:3, :3]) for p in rig.all_pairs()]
+
+
+def pair_offset(geometry: PairGeometry, W: MarkerPose, S: MarkerPose, camera: str, time: float) -> PairOffset:
     """The offset of one pair seen by one camera, in the jacket frame (topside minus mated)."""
-    T_W_S_mated = rig.T_W_S_mated(pair)
-    W, S = resolve_pair(W, S, T_W_S_mated)
+    pair = geometry.pair
+    W, S = resolve_pair(W, S, geometry.T_W_S_mated)
     T_W_S = relative_pose(W.T_camera_marker, S.T_camera_marker)
-    R_jacket_W = rig.marker_by_id[pair.jacket].T_body_marker[:3, :3]
-    offset = R_jacket_W @ (T_W_S[:3, 3] - T_W_S_mated[:3, 3])
+    offset = geometry.R_jacket_W @ (T_W_S[:3, 3] - geometry.T_W_S_mated[:3, 3])
     return PairOffset(time=time, camera=camera, cone=pair.cone, face=pair.face, jacket_id=pair.jacket,
                       topside_id=pair.topside, T_W_S=T_W_S, offset=offset, choice=_weaker(W.choice, S.choice))
 
 
-def frame_offsets(rig: Rig, poses: dict[int, MarkerPose], camera: str, time: float) -> list[PairOffset]:
-    """Offsets of every rig pair whose two markers are both among the poses of one frame."""
-    return [pair_offset(rig, p, poses[p.jacket], poses[p.topside], camera, time)
-            for p in rig.all_pairs() if p.jacket in poses and p.topside in poses]
+def frame_offsets(geometries: list[PairGeometry], poses: dict[int, MarkerPose], camera: str, time: float
+                  ) -> list[PairOffset]:
+    """Offsets of every pair whose two markers are both among the poses of one frame."""
+    return [pair_offset(g, poses[g.pair.jacket], poses[g.pair.topside], camera, time)
+            for g in geometries if g.pair.jacket in poses and g.pair.topside in poses]

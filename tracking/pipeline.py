@@ -12,9 +12,9 @@ from tracking.camera import CameraModel, load_camera
 from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetector, Refinement
 from tracking.errors import InputError
 from tracking.images import Frame, frames
-from tracking.offsets import PairOffset, frame_offsets
+from tracking.offsets import PairGeometry, PairOffset, frame_offsets, pair_geometries
 from tracking.pose import Choice, MarkerPose, estimate_pose
-from tracking.rig import CameraEntry, Rig
+from tracking.rig import CameraEntry, Marker, Rig
 
 
 @dataclass
@@ -62,6 +62,12 @@ class CameraTracker:
     camera: CameraModel
     detector: MarkerDetector
     keep_color: bool = False
+    geometries: list[PairGeometry] = field(default_factory=list)
+    markers: dict[int, Marker] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.geometries = pair_geometries(self.rig)
+        self.markers = self.rig.marker_by_id
 
     @classmethod
     def from_rig(cls, rig: Rig, entry: CameraEntry, refinement: Refinement, keep_color: bool = False
@@ -76,11 +82,10 @@ class CameraTracker:
             raise InputError(self.entry.source, f"frame is {frame.gray.shape[1]}x{frame.gray.shape[0]} but the "
                              f"calibration is for {self.camera.width}x{self.camera.height}", "image size")
         detections = self.detector.detect(frame.gray, keep_rejected=self.keep_color)
-        known = self.rig.marker_by_id
         poses = {d.id: estimate_pose(d, self.camera, self.rig.marker_size) for d in detections.markers
-                 if d.id in known}
-        unknown = [d.id for d in detections.markers if d.id not in known]
-        offsets = frame_offsets(self.rig, poses, self.entry.name, frame.time)
+                 if d.id in self.markers}
+        unknown = [d.id for d in detections.markers if d.id not in self.markers]
+        offsets = frame_offsets(self.geometries, poses, self.entry.name, frame.time)
         return FrameResult(self.entry.name, frame, detections, poses, offsets, unknown)
 
     def run(self) -> Iterator[FrameResult]:

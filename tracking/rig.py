@@ -53,11 +53,6 @@ def face_rotation(face: str) -> np.ndarray:
     return normal_rotation(np.array(FACE_NORMALS[face]))
 
 
-def aruco_dictionary_names() -> list[str]:
-    """Names of OpenCV's predefined ArUco dictionaries (DICT_6X6_250, ...)."""
-    return sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_"))
-
-
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 

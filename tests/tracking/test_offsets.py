@@ -17,7 +17,7 @@ from tests.synthetic import (
 )
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetector
-from tracking.offsets import frame_offsets, relative_pose
+from tracking.offsets import frame_offsets, pair_geometries, relative_pose
 from tracking.pose import estimate_pose
 from tracking.rig import Rig
 
@@ -53,7 +53,7 @@ def test_pair_offsets_from_rendered_frames(offset: list[float]) -> None:
             placed.append(PlacedMarker(mid, np.linalg.inv(T_jacket_cam) @ T, 1.0))
         image = render(PAPER_K, DIST, PAPER_SIZE, placed, noise=1.0)
         poses = {m.id: estimate_pose(m, camera, rig.marker_size) for m in detector.detect(image).markers}
-        offsets = frame_offsets(rig, poses, name, time=1.5)
+        offsets = frame_offsets(pair_geometries(rig), poses, name, time=1.5)
         faces = {o.face for o in offsets}
         assert offsets and all(o.time == 1.5 and o.camera == name for o in offsets)
         for o in offsets:
