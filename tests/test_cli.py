@@ -32,10 +32,10 @@ def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) ->
 
 def test_track_raw(installation: Path, tmp_path: Path) -> None:
     out = tmp_path / "offsets.csv"
-    proc = run("track", "--rig", installation / "rig.yaml", "-o", out)
+    proc = run("track", "--rig", installation / "rig.yaml", "--mode", "raw", "-o", out)
     assert proc.returncode == 0, proc.stderr
     df = pd.read_csv(out)
-    assert list(df.columns) == ["time", "cone", "dx", "dy", "dz", "cameras"]
+    assert list(df.columns) == ["time", "cone", "dx", "dy", "dz", "cameras", "sdx", "sdy", "sdz"]
     assert len(df) == 2 * FRAMES  # each camera sees one pair in every frame
     assert df["time"].is_monotonic_increasing
     assert set(df["cameras"]) == {"cam-ahead", "cam-port"}
@@ -65,9 +65,22 @@ def test_track_paper_mode(installation: Path, tmp_path: Path) -> None:
     assert np.isnan(df.iloc[0]["dy"])  # the first row has only the first camera's axes
 
 
+def test_track_fused_is_the_default(installation: Path, tmp_path: Path) -> None:
+    out = tmp_path / "fused.csv"
+    proc = run("track", "--rig", installation / "rig.yaml", "-o", out)
+    assert proc.returncode == 0, proc.stderr
+    df = pd.read_csv(out)
+    assert len(df) == 2 * FRAMES  # one row per frame for the one cone
+    assert set(df["cameras"].iloc[1:]) == {"cam-ahead cam-port"}  # both cameras fused from the second frame
+    truth = np.array([motion(t) for t in df["time"]])
+    err = df[["dx", "dy", "dz"]].to_numpy() - truth
+    assert np.abs(err[4:]).max() < 0.01  # each camera's depth is covered by the other's lateral axis
+    assert (df[["sdx", "sdy", "sdz"]].to_numpy()[4:] < 0.05).all()
+
+
 def test_evaluate(installation: Path, tmp_path: Path) -> None:
     out = tmp_path / "offsets.csv"
-    assert run("track", "--rig", installation / "rig.yaml", "-o", out).returncode == 0
+    assert run("track", "--rig", installation / "rig.yaml", "--mode", "raw", "-o", out).returncode == 0
     proc = run("evaluate", out, installation / "truth.csv", "--markdown", tmp_path / "acc.md")
     assert proc.returncode == 0, proc.stderr
     table = (tmp_path / "acc.md").read_text()

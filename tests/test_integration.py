@@ -41,7 +41,7 @@ def clear_scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_track_simulated_videos_by_capture_time(clear_scene: Path, tmp_path: Path) -> None:
-    proc = run("track", "--rig", clear_scene / "rig.yaml", "-o", tmp_path / "raw.csv")
+    proc = run("track", "--rig", clear_scene / "rig.yaml", "--mode", "raw", "-o", tmp_path / "raw.csv")
     assert proc.returncode == 0, proc.stderr
     df = read_offsets(tmp_path / "raw.csv")
     frames = pd.read_csv(clear_scene / "truth_frames.csv").drop_duplicates(["camera", "frame_index"])
@@ -53,3 +53,14 @@ def test_track_simulated_videos_by_capture_time(clear_scene: Path, tmp_path: Pat
     drones = err[err["cameras"].str.startswith("drone")]
     assert len(drones) > 100
     assert np.median(np.abs(drones[["ex", "ey", "ez"]].to_numpy())) < 0.05  # drones 10-25 m: a few cm
+
+
+def test_fused_on_simulated_videos(clear_scene: Path, tmp_path: Path) -> None:
+    proc = run("track", "--rig", clear_scene / "rig.yaml", "-o", tmp_path / "fused.csv")
+    assert proc.returncode == 0, proc.stderr
+    df = read_offsets(tmp_path / "fused.csv")
+    assert set(df["cone"]) == {"A", "B", "C", "D"}  # every cone of the rig, seen or not
+    err = errors(df[df["cone"].isin(["A", "D"])].dropna(subset=["dx"]), read_truth(clear_scene / "truth.csv"))
+    late = err[err["time"] > err["time"].min() + 0.5]
+    assert len(late) > 50
+    assert np.median(np.abs(late[["ex", "ey", "ez"]].to_numpy())) < 0.02

@@ -144,11 +144,24 @@ def detect(
         err_console.print(f"{n_frames} frames; markers not in the rig ignored: {summary}")
 
 
+def _modes() -> dict:
+    from tracking.filtering import paper_filter, raw_estimates
+    from tracking.fusion import fused_estimates, smoothed_estimates
+
+    return {"fused": fused_estimates, "smoothed": smoothed_estimates, "paper": paper_filter,
+            "raw": lambda rig, ms: raw_estimates(ms)}
+
+
+MODES = ("fused", "smoothed", "paper", "raw")
+
+
 @app.command()
 def track(
     rig: Annotated[Path, typer.Option(help="Rig file of the installation.")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Offsets CSV to write.")] = Path("offsets.csv"),
-    mode: Annotated[str, typer.Option(help="raw: every camera's pair offset; paper: the paper's method.")] = "raw",
+    mode: Annotated[str, typer.Option(help="fused: live rigid-body Kalman filter of all cameras; smoothed: the "
+                                           "same, then smoothed over the whole run (RTS); paper: the paper's "
+                                           "method; raw: every camera's pair offset.")] = "fused",
     refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = DEFAULT_REFINEMENT,
     rrd: Annotated[Path | None, typer.Option(help="Also record everything to this Rerun file (.rrd).")] = None,
     truth: Annotated[Path | None, typer.Option(help="Ground-truth log to overlay in the recording.")] = None,
@@ -158,13 +171,13 @@ def track(
     from rich.table import Table
 
     from tracking.evaluate import read_truth
-    from tracking.filtering import paper_filter, raw_estimates
     from tracking.pipeline import TrackStats, source_frame_count, track_rig
     from tracking.report import write_offsets_csv
     from tracking.rig import load_rig
 
-    if mode not in ("raw", "paper"):
-        raise InputError("--mode", f"{mode!r} is not a mode (expected raw or paper)")
+    if mode not in MODES:
+        raise InputError("--mode", f"{mode!r} is not a mode (expected {', '.join(MODES)})")
+    estimator = _modes()[mode]
     the_rig = load_rig(rig)
     truth_df = read_truth(truth) if truth else None
     recorder = None
@@ -192,7 +205,7 @@ def track(
                     recorder.on_estimate(e)
                 yield e
 
-        estimates = paper_filter(the_rig, measurements()) if mode == "paper" else raw_estimates(measurements())
+        estimates = estimator(the_rig, measurements())
         try:
             n_rows = write_offsets_csv(out, recorded(estimates))
         finally:

@@ -22,6 +22,7 @@ class ConeEstimate:
     cone: str
     offset: np.ndarray  # (3,) dx, dy, dz in the jacket frame, m; NaN where no camera gives the axis
     cameras: tuple[str, ...]
+    covariance: np.ndarray | None = None  # (3, 3) m², where the estimator knows it
 
 
 def paper_roles(rig: Rig) -> dict[tuple[str, str], str]:
@@ -76,4 +77,4 @@ def paper_filter(rig: Rig, measurements: Iterable[PairOffset]) -> Iterator[ConeE
 def raw_estimates(measurements: Iterable[PairOffset]) -> Iterator[ConeEstimate]:
     """Every camera's pair offset as it is, unfiltered."""
     for m in measurements:
-        yield ConeEstimate(m.time, m.cone, m.offset.copy(), (m.camera,))
+        yield ConeEstimate(m.time, m.cone, m.offset.copy(), (m.camera,), m.covariance)

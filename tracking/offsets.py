@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from tracking.pose import Choice, MarkerPose
 from tracking.rig import Pair, Rig
 
+JACOBIAN_STEP = 1e-6  # rad or m, for the numeric Jacobian of the offset
 MAX_PAIR_TILT_RAD = np.deg2rad(10.0)  # topside and jacket markers of a pair are never this far from parallel
 
 
@@ -24,7 +26,10 @@ class PairOffset:
     topside_id: int
     T_W_S: np.ndarray  # (4, 4) topside marker S in jacket marker W's frame (eq. 12)
     offset: np.ndarray  # (3,) topside minus mated, jacket frame, m
+    covariance: np.ndarray  # (3, 3) of the offset, from both markers' pose covariances, m²
     choice: Choice  # how the IPPE ambiguity was settled (the weaker of the two markers)
+    alternatives: tuple[tuple[np.ndarray, np.ndarray], ...] = ()  # (offset, covariance) of the other IPPE
+    # combinations when a marker was not unique: a filter with a prediction can settle what one frame cannot
 
 
 def relative_pose(T_camera_W: np.ndarray, T_camera_S: np.ndarray) -> np.ndarray:
@@ -81,14 +86,48 @@ def pair_geometries(rig: Rig) -> list[PairGeometry]:
     return [PairGeometry(p, rig.T_W_S_mated(p), by_id[p.jacket].T_body_marker[:3, :3]) for p in rig.all_pairs()]
 
 
+def _offset_from_params(geometry: PairGeometry, params: np.ndarray) -> np.ndarray:
+    """Offset (3,) from (rvec_W, tvec_W, rvec_S, tvec_S) (12,): eq. 16 then topside minus mated."""
+    R_cw = cv2.Rodrigues(params[0:3])[0]
+    t_ws = R_cw.T @ (params[9:12] - params[3:6])
+    return geometry.R_jacket_W @ (t_ws - geometry.T_W_S_mated[:3, 3])
+
+
+def offset_covariance(geometry: PairGeometry, W: MarkerPose, S: MarkerPose) -> np.ndarray:
+    """(3, 3) covariance of a pair offset: both markers' (6, 6) pose covariances through a numeric Jacobian."""
+    params = np.concatenate([cv2.Rodrigues(W.T_camera_marker[:3, :3])[0].reshape(3), W.T_camera_marker[:3, 3],
+                             cv2.Rodrigues(S.T_camera_marker[:3, :3])[0].reshape(3), S.T_camera_marker[:3, 3]])
+    base = _offset_from_params(geometry, params)
+    J = np.empty((3, 12))
+    for k in range(12):
+        step = np.zeros(12)
+        step[k] = JACOBIAN_STEP
+        J[:, k] = (_offset_from_params(geometry, params + step) - base) / JACOBIAN_STEP
+    C = np.zeros((12, 12))
+    C[:6, :6] = W.covariance
+    C[6:, 6:] = S.covariance
+    return J @ C @ J.T
+
+
 def pair_offset(geometry: PairGeometry, W: MarkerPose, S: MarkerPose, camera: str, time: float) -> PairOffset:
-    """The offset of one pair seen by one camera, in the jacket frame (topside minus mated)."""
+    """The offset of one pair seen by one camera, in the jacket frame (topside minus mated), with covariance."""
     pair = geometry.pair
     W, S = resolve_pair(W, S, geometry.T_W_S_mated)
     T_W_S = relative_pose(W.T_camera_marker, S.T_camera_marker)
     offset = geometry.R_jacket_W @ (T_W_S[:3, 3] - geometry.T_W_S_mated[:3, 3])
+    alternatives = []
+    for i in range(2) if W.choice != Choice.UNIQUE else (W.chosen,):
+        for j in range(2) if S.choice != Choice.UNIQUE else (S.chosen,):
+            if (i, j) == (W.chosen, S.chosen):
+                continue
+            Wi, Sj = W.with_choice(i, W.choice), S.with_choice(j, S.choice)
+            rel = relative_pose(Wi.T_camera_marker, Sj.T_camera_marker)
+            alternatives.append((geometry.R_jacket_W @ (rel[:3, 3] - geometry.T_W_S_mated[:3, 3]),
+                                 offset_covariance(geometry, Wi, Sj)))
     return PairOffset(time=time, camera=camera, cone=pair.cone, face=pair.face, jacket_id=pair.jacket,
-                      topside_id=pair.topside, T_W_S=T_W_S, offset=offset, choice=_weaker(W.choice, S.choice))
+                      topside_id=pair.topside, T_W_S=T_W_S, offset=offset,
+                      covariance=offset_covariance(geometry, W, S), choice=_weaker(W.choice, S.choice),
+                      alternatives=tuple(alternatives))
 
 
 def frame_offsets(geometries: list[PairGeometry], poses: dict[int, MarkerPose], camera: str, time: float

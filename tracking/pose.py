@@ -12,6 +12,7 @@ from tracking.camera import CameraModel
 from tracking.detection import MarkerDetection
 
 AMBIGUITY_RATIO = 1.5  # a pose is unambiguous only when the other IPPE solution reprojects this much worse ...
+CORNER_SIGMA_PX = 0.08  # corner noise floor: RMS of the edge-fit corners over all conditions (corners.md)
 AMBIGUITY_GAP_PX = 0.25  # ... and worse by this much in absolute terms: below it, corner noise could swap them
 
 
@@ -39,10 +40,11 @@ def rt_to_T(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PoseSolution:
-    """One IPPE solution: T_camera_marker and its RMS reprojection error in px."""
+    """One IPPE solution: T_camera_marker, its RMS reprojection error in px, and its covariance."""
 
     T_camera_marker: np.ndarray  # (4, 4)
     reprojection_error: float
+    covariance: np.ndarray  # (6, 6) of (rvec, tvec) of T_camera_marker, from the corner noise
 
 
 @dataclass(frozen=True)
@@ -66,6 +68,11 @@ class MarkerPose:
         return self.solutions[self.chosen].reprojection_error
 
     @property
+    def covariance(self) -> np.ndarray:
+        """(6, 6) covariance of the chosen solution's (rvec, tvec)."""
+        return self.solutions[self.chosen].covariance
+
+    @property
     def ambiguity(self) -> float:
         """Reprojection error of the worse solution over the better one (large = unambiguous)."""
         e0, e1 = (s.reprojection_error for s in self.solutions)
@@ -76,14 +83,23 @@ class MarkerPose:
         return MarkerPose(self.id, self.corners, self.solutions, chosen, choice)
 
 
+def pose_covariance(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray,
+                    sigma_px: float) -> np.ndarray:
+    """(6, 6) covariance of (rvec, tvec) for isotropic corner noise sigma_px: σ² (JᵀJ)⁻¹ (Gauss-Newton)."""
+    _, jac = cv2.projectPoints(object_points, rvec, tvec, K, None)
+    J = jac[:, :6]
+    return sigma_px**2 * np.linalg.pinv(J.T @ J)
+
+
 def estimate_pose(detection: MarkerDetection, camera: CameraModel, marker_size: float) -> MarkerPose:
-    """Both IPPE_SQUARE solutions for one marker, from its undistorted corners."""
+    """Both IPPE_SQUARE solutions for one marker, from its undistorted corners, with their covariances."""
     ideal = camera.undistort_points(detection.corners)
-    _, rvecs, tvecs, errors = cv2.solvePnPGeneric(
-        marker_object_points(marker_size), ideal.reshape(-1, 1, 2), camera.K, None,
-        flags=cv2.SOLVEPNP_IPPE_SQUARE)
-    sols = [PoseSolution(rt_to_T(r, t), float(e)) for r, t, e in
-            zip(rvecs, tvecs, np.asarray(errors).reshape(-1), strict=True)]
+    obj = marker_object_points(marker_size)
+    _, rvecs, tvecs, errors = cv2.solvePnPGeneric(obj, ideal.reshape(-1, 1, 2), camera.K, None,
+                                                  flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    sols = [PoseSolution(rt_to_T(r, t), float(e),
+                         pose_covariance(obj, r, t, camera.K, max(CORNER_SIGMA_PX, float(e))))
+            for r, t, e in zip(rvecs, tvecs, np.asarray(errors).reshape(-1), strict=True)]
     if len(sols) == 1:
         sols.append(sols[0])
     sols.sort(key=lambda s: s.reprojection_error)

@@ -6,9 +6,11 @@ import csv
 from collections.abc import Iterable
 from pathlib import Path
 
+import numpy as np
+
 from tracking.filtering import ConeEstimate
 
-OFFSET_COLUMNS = ("time", "cone", "dx", "dy", "dz", "cameras")
+OFFSET_COLUMNS = ("time", "cone", "dx", "dy", "dz", "cameras", "sdx", "sdy", "sdz")  # sd*: 1σ, m
 
 
 def write_offsets_csv(path: str | Path, estimates: Iterable[ConeEstimate]) -> int:
@@ -20,7 +22,9 @@ def write_offsets_csv(path: str | Path, estimates: Iterable[ConeEstimate]) -> in
         writer = csv.writer(f)
         writer.writerow(OFFSET_COLUMNS)
         for e in estimates:
-            writer.writerow([f"{e.time:.6f}", e.cone, *(f"{v:.5f}" for v in e.offset), " ".join(e.cameras)])
+            sd = np.sqrt(np.diag(e.covariance)) if e.covariance is not None else np.full(3, np.nan)
+            writer.writerow([f"{e.time:.6f}", e.cone, *(f"{v:.5f}" for v in e.offset), " ".join(e.cameras),
+                             *(f"{v:.5f}" for v in sd)])
             n += 1
             if n % 100 == 0:
                 f.flush()

@@ -9,6 +9,7 @@ from tracking.sim.motion import Motion
 from tracking.sim.render import FrameState, Segment
 from tracking.sim.scenario import CameraSpec, Scenario
 from tracking.sim.scene import (
+    CONE_SIGNS,
     Body,
     attach_plates,
     jacket_body,
@@ -115,7 +116,7 @@ class World:
         pairs = [Pair(cone=p.cone, face=p.face, jacket=p.jacket_id, topside=p.topside_id,
                       mated=(np.array(by_id[p.topside_id].center) - np.array(by_id[p.jacket_id].center))
                       .round(6).tolist()) for p in self.scenario.pairs]
-        cones = sorted({p.cone for p in self.scenario.pairs})
+        cones = sorted(CONE_SIGNS)  # every cone tip, as a user would survey them: the tracker reports them all
         return Rig(name=self.scenario.name, dictionary=self.scenario.dictionary,
                    marker_size=self.scenario.marker_size,
                    cones={c: self.layout.cone_tip(c).round(6).tolist() for c in cones},
