@@ -258,25 +258,36 @@ def simulate(
 
 @app.command()
 def evaluate(
-    offsets: Annotated[Path, typer.Argument(help="Offsets CSV from `topside track`.")],
-    truth: Annotated[Path, typer.Argument(help="Ground-truth log (truth.csv from `topside simulate`).")],
+    runs: Annotated[list[Path], typer.Argument(help="OFFSETS.csv TRUTH.csv, repeated: runs pooled into one table.")],
+    name: Annotated[str, typer.Option(help="Name of the group of runs (e.g. 'procedures 5, 6, 7').")] = "",
     markdown: Annotated[Path | None, typer.Option(help="Also write the table as markdown.")] = None,
+    plots: Annotated[Path | None, typer.Option(help="Folder for estimate/truth/error plots per cone.")] = None,
 ) -> None:
-    """Print the paper's accuracy table (e_MAE, |e|max, σ_e, μ_e per axis) and RMSE against the truth."""
+    """The paper's accuracy table (e_MAE, |e|max, σ_e, μ_e per axis), RMSE, lag and availability against truth."""
     from rich.table import Table
 
-    from tracking.evaluate import errors, markdown_table, read_offsets, read_truth, summary
+    from tracking.evaluate import evaluate_runs, evaluation_markdown, plot_run, read_offsets, read_truth
 
-    stats = summary(errors(read_offsets(offsets), read_truth(truth)))
-    table = Table(title=f"{offsets.name} against {truth.name} (m)")
+    if len(runs) % 2:
+        raise InputError(runs[-1], "has no truth file after it (expected OFFSETS.csv TRUTH.csv pairs)")
+    pairs = [(read_offsets(runs[i]), read_truth(runs[i + 1])) for i in range(0, len(runs), 2)]
+    label = name or ", ".join(str(runs[i].name) for i in range(0, len(runs), 2))
+    ev = evaluate_runs(label, pairs)
+    table = Table(title=f"{label} against the truth (m)")
     for col in ("axis", "e_MAE", "|e|max", "σ_e", "μ_e", "RMSE", "n"):
         table.add_column(col, justify="right")
-    for axis, s in stats.items():
+    for axis, s in ev.axes.items():
         table.add_row(axis, f"{s.mae:.3f}", f"{s.max_abs:.3f}", f"{s.std:.3f}", f"{s.mean:.3f}", f"{s.rmse:.3f}",
                       str(s.n))
     console.print(table)
+    console.print(f"lag {ev.lag_s:.2f} s (cross-correlation) · availability {ev.availability:.1%} "
+                  f"(share of time with an estimate at most 0.5 s old)")
     if markdown:
-        markdown.write_text(markdown_table(stats, f"{offsets.name} against {truth.name}") + "\n")
+        markdown.write_text(evaluation_markdown(ev))
+    if plots:
+        for i, (off, tru) in enumerate(pairs):
+            for path in plot_run(off, tru, plots, runs[2 * i].stem):
+                console.print(f"wrote {path}")
 
 
 DEMO_SCENARIO = "config2-procedure5-weather"
@@ -302,7 +313,7 @@ def demo(
     track(rig=scene / "rig.yaml", out=csv, mode="paper", refine=DEFAULT_REFINEMENT, rrd=rrd,
           truth=scene / "truth.csv", rejected=False)
     console.rule("3/3 accuracy against the simulator's truth")
-    evaluate(offsets=csv, truth=scene / "truth.csv", markdown=out / "demo-accuracy.md")
+    evaluate(runs=[csv, scene / "truth.csv"], name="demo", markdown=out / "demo-accuracy.md", plots=None)
     if not no_viewer and has_display():
         view(recording=rrd, web=False, bind="127.0.0.1")
     else:

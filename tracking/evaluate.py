@@ -11,6 +11,12 @@ import pandas as pd
 from tracking.errors import InputError
 
 AXES = ("dx", "dy", "dz")
+LAG_GRID_HZ = 50.0
+MAX_LAG_S = 1.5
+MIN_MOTION_M = 0.05  # an axis must move at least this much (σ of the truth) for its lag to mean anything
+MIN_PEAK_CONTRAST = 1e-3  # correlation must vary this much over the shifts for a lag to be defined
+AVAILABILITY_GRID_HZ = 10.0
+MAX_ESTIMATE_AGE_S = 0.5  # an estimate older than this no longer counts as available
 
 
 @dataclass(frozen=True)
@@ -95,3 +101,113 @@ def markdown_table(stats: dict[str, AxisStats], title: str = "") -> str:
     for axis, s in stats.items():
         lines.append(f"| {axis} | {s.mae:.3f} | {s.max_abs:.3f} | {s.std:.3f} | {s.mean:.3f} | {s.rmse:.3f} | {s.n} |")
     return "\n".join(lines)
+
+
+def estimate_lag(times: np.ndarray, estimate: np.ndarray, truth_times: np.ndarray, truth: np.ndarray) -> float:
+    """Delay of an estimate behind the truth, s, by cross-correlation on a uniform grid (NaN if flat)."""
+    ok = np.isfinite(estimate)
+    if ok.sum() < 10:
+        return float("nan")
+    grid = np.arange(times[ok][0], times[ok][-1], 1.0 / LAG_GRID_HZ)
+    true = np.interp(grid, truth_times, truth)
+    if grid.size < 10 or np.std(true) < MIN_MOTION_M:
+        return float("nan")
+    est = np.interp(grid, times[ok], estimate[ok])
+    shifts = np.arange(-int(MAX_LAG_S * LAG_GRID_HZ), int(MAX_LAG_S * LAG_GRID_HZ) + 1)
+    scores = []
+    for k in shifts:  # estimate(t) against truth(t - k dt): positive k = the estimate lags
+        a, b = (est[k:], true[: true.size - k]) if k >= 0 else (est[:k], true[-k:])
+        scores.append(np.corrcoef(a - a.mean(), b - b.mean())[0, 1] if a.size > 10 else -np.inf)
+    scores = np.array(scores)
+    if np.ptp(scores[np.isfinite(scores)]) < MIN_PEAK_CONTRAST:
+        return float("nan")  # no peak: a constant-speed ramp correlates with itself at every shift
+    return float(shifts[int(np.argmax(scores))] / LAG_GRID_HZ)
+
+
+def lag(offsets: pd.DataFrame, truth: pd.DataFrame) -> float:
+    """Median lag over every cone and axis that moves, s."""
+    lags = []
+    for cone, rows in offsets.groupby("cone"):
+        cols = [f"cone_{cone}_{a}" for a in AXES]
+        if any(c not in truth.columns for c in cols):
+            continue
+        for axis, col in zip(AXES, cols, strict=True):
+            lags.append(estimate_lag(rows["time"].to_numpy(), rows[axis].to_numpy(dtype=float),
+                                     truth["time"].to_numpy(), truth[col].to_numpy()))
+    lags = [v for v in lags if np.isfinite(v)]
+    return float(np.median(lags)) if lags else float("nan")
+
+
+def availability(offsets: pd.DataFrame, truth: pd.DataFrame) -> float:
+    """Share of the run, over the cones estimated, with an estimate at most MAX_ESTIMATE_AGE_S old."""
+    grid = np.arange(truth["time"].min(), truth["time"].max(), 1.0 / AVAILABILITY_GRID_HZ)
+    shares = []
+    for _, rows in offsets.groupby("cone"):
+        valid = np.sort(rows.loc[rows[list(AXES)].notna().all(axis=1), "time"].to_numpy())
+        if valid.size == 0:
+            shares.append(0.0)
+            continue
+        idx = np.searchsorted(valid, grid, side="right") - 1
+        age = np.where(idx >= 0, grid - valid[np.clip(idx, 0, None)], np.inf)
+        shares.append(float(np.mean(age <= MAX_ESTIMATE_AGE_S)))
+    return float(np.mean(shares)) if shares else 0.0
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """The paper's table and the figures beyond it, for one group of runs."""
+
+    name: str
+    axes: dict[str, AxisStats]
+    lag_s: float
+    availability: float
+
+
+def evaluate_runs(name: str, runs: list[tuple[pd.DataFrame, pd.DataFrame]]) -> Evaluation:
+    """Pool the errors of several (offsets, truth) runs into one table; lag and availability averaged."""
+    errs = pd.concat([errors(o, t) for o, t in runs], ignore_index=True)
+    lags = [lag(o, t) for o, t in runs]
+    lags = [v for v in lags if np.isfinite(v)]
+    return Evaluation(name, summary(errs), float(np.mean(lags)) if lags else float("nan"),
+                      float(np.mean([availability(o, t) for o, t in runs])))
+
+
+def evaluation_markdown(ev: Evaluation) -> str:
+    """One group's table, with lag and availability beneath it."""
+    return (markdown_table(ev.axes, ev.name) +
+            f"\n\nlag {ev.lag_s:.2f} s · availability {ev.availability:.1%}\n")
+
+
+def plot_run(offsets: pd.DataFrame, truth: pd.DataFrame, out_dir: Path, name: str) -> list[Path]:
+    """Estimate, truth and error per axis over time, one PNG per cone (the paper's Fig. 12)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    for cone, rows in offsets.groupby("cone"):
+        cols = [f"cone_{cone}_{a}" for a in AXES]
+        if any(c not in truth.columns for c in cols):
+            continue
+        fig, axs = plt.subplots(3, 2, figsize=(12, 8), sharex=True, gridspec_kw={"width_ratios": [2, 1]})
+        true = truth_at(truth, str(cone), rows["time"].to_numpy())
+        for i, axis in enumerate(AXES):
+            axs[i, 0].plot(truth["time"], truth[cols[i]], color="0.5", lw=1.5, label="simulation log")
+            axs[i, 0].plot(rows["time"], rows[axis], lw=1.0, label="estimate")
+            axs[i, 0].set_ylabel(f"{axis} [m]")
+            axs[i, 1].plot(rows["time"], rows[axis].to_numpy() - true[:, i], lw=0.8)
+            axs[i, 1].axhline(0.15, color="r", lw=0.8)
+            axs[i, 1].axhline(-0.15, color="r", lw=0.8)
+            axs[i, 1].set_ylabel(f"error {axis} [m]")
+        axs[0, 0].legend(loc="best")
+        axs[-1, 0].set_xlabel("capture time [s]")
+        axs[-1, 1].set_xlabel("capture time [s]")
+        fig.suptitle(f"{name}: cone {cone}")
+        fig.tight_layout()
+        path = out_dir / f"{name}_cone_{cone}.png"
+        fig.savefig(path, dpi=80)
+        plt.close(fig)
+        written.append(path)
+    return written

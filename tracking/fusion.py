@@ -42,7 +42,7 @@ class FilterTuning:
     """Process and prior noise of the topside filter."""
 
     accel_psd: float = 0.05  # m²/s³: white-noise acceleration of the translation (crane and waves)
-    angular_accel_psd: float = 1e-5  # rad²/s³
+    angular_accel_psd: float = 1e-6  # rad²/s³: a topside hanging from cranes yaws and rolls slowly
     prior_position_m: float = 20.0
     prior_rotation_rad: float = 0.05
     prior_speed_mps: float = 1.0
