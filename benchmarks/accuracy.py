@@ -1,0 +1,206 @@
+"""Accuracy on the simulator's procedures 1–7 and the set-down, in the layout of the paper's Tables III and IV.
+
+Every procedure is rendered in its paper configuration (1–4: configuration 1, 5–7: configuration 2)
+with fog 50 % and rain 30 %, at 920×600 and 15 FPS, then tracked once; the same measurements are
+estimated in the paper's mode, the live rigid-body filter (default) and the offline smoother, and
+compared with the simulation log at the monitored cones. Results: benchmarks/results/accuracy.md.
+
+Run: .venv/bin/python benchmarks/accuracy.py [--fps 15] [--jobs 2] [--only config2-procedure5]
+Renders are cached in benchmarks/.cache/ (delete it to re-render).
+"""
+
+from __future__ import annotations
+
+import argparse
+import pickle
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from tracking.evaluate import Evaluation, errors, evaluate_runs, truth_at
+from tracking.filtering import ConeEstimate, paper_filter
+from tracking.fusion import fused_estimates, smoothed_estimates
+from tracking.pipeline import track_rig
+from tracking.rig import load_rig
+
+REPO = Path(__file__).resolve().parents[1]
+CACHE = REPO / "benchmarks" / ".cache"
+RESULTS = REPO / "benchmarks" / "results" / "accuracy.md"
+WEATHER = "-weather"
+RUNS = {  # scenario -> group, as the paper pools them
+    "config1-procedure1": "Configuration 1, procedures 1 and 2",
+    "config1-procedure2": "Configuration 1, procedures 1 and 2",
+    "config1-procedure3": "Configuration 1, procedures 3 and 4 (waves)",
+    "config1-procedure4": "Configuration 1, procedures 3 and 4 (waves)",
+    "config2-procedure5": "Configuration 2, procedures 5, 6, 7",
+    "config2-procedure6": "Configuration 2, procedures 5, 6, 7",
+    "config2-procedure7": "Configuration 2, procedures 5, 6, 7",
+    "config2-setdown": "Configuration 2, set-down (not in the paper)",
+}
+PAPER = {  # the paper's published e_MAE, |e|max, σ_e, μ_e per axis (Tables III and IV), m
+    "Configuration 1, procedures 1 and 2": {"x": (0.048, 0.137, 0.048, -0.028), "y": (0.043, 0.125, 0.035, -0.035),
+                                            "z": (0.048, 0.104, 0.015, -0.048)},
+    "Configuration 1, procedures 3 and 4 (waves)": {"x": (0.032, 0.295, 0.043, -0.019),
+                                                    "y": (0.031, 0.252, 0.043, -0.013),
+                                                    "z": (0.016, 0.090, 0.019, -0.011)},
+    "Configuration 2, procedures 5, 6, 7": {"x": (0.019, 0.105, 0.022, -0.028), "y": (0.023, 0.092, 0.020, -0.035),
+                                            "z": (0.034, 0.082, 0.011, -0.037)},
+}
+MODES = ("paper", "fused", "smoothed")
+TOLERANCE_M = 0.15
+
+
+def render(name: str, fps: float) -> Path:
+    """Render one scenario at the given frame rate into the cache (once)."""
+    from tracking.sim.command import effective_duration, render_scenario
+    from tracking.sim.scenario import load_scenario
+
+    out = CACHE / f"{name}{WEATHER}-{fps:g}fps"
+    if (out / "truth.csv").is_file():
+        return out
+    sc = load_scenario(name + WEATHER)
+    sc = sc.model_copy(update={"cameras": [c.model_copy(update={"fps": fps}) for c in sc.cameras]})
+    out.mkdir(parents=True, exist_ok=True)
+    render_scenario(sc, out, effective_duration(sc, None), quiet=True)
+    return out
+
+
+def frame(estimates: list[ConeEstimate]) -> pd.DataFrame:
+    """Estimates as an offsets table."""
+    return pd.DataFrame({"time": [e.time for e in estimates], "cone": [e.cone for e in estimates],
+                         **{a: [e.offset[i] for e in estimates] for i, a in enumerate(("dx", "dy", "dz"))}})
+
+
+def run(name: str, fps: float) -> dict:
+    """Render, track once, estimate in every mode; timings included."""
+    t0 = time.perf_counter()
+    scene = render(name, fps)
+    t1 = time.perf_counter()
+    rig = load_rig(scene / "rig.yaml")
+    cache = scene / "measurements.pkl"
+    if cache.is_file():
+        measurements = pickle.loads(cache.read_bytes())
+    else:
+        measurements = [o for r in track_rig(rig) for o in r.offsets]
+        cache.write_bytes(pickle.dumps(measurements))
+    t2 = time.perf_counter()
+    monitored = sorted({p.cone for p in rig.all_pairs()})
+    out = {"name": name, "truth": pd.read_csv(scene / "truth.csv"), "monitored": monitored,
+           "render_s": t1 - t0, "track_s": t2 - t1}
+    for mode, estimator in (("paper", paper_filter), ("fused", fused_estimates), ("smoothed", smoothed_estimates)):
+        out[mode] = frame(list(estimator(rig, measurements)))
+    return out
+
+
+def working_range(result: dict, mode: str, axis: str) -> float:
+    """Largest true offset along the moving axis within which every error stays inside the tolerance, m."""
+    df = result[mode]
+    df = df[df["cone"].isin(result["monitored"])].dropna(subset=["dx", "dy", "dz"])
+    worst = {}
+    for cone, rows in df.groupby("cone"):
+        true = truth_at(result["truth"], str(cone), rows["time"].to_numpy())
+        err = np.abs(rows[["dx", "dy", "dz"]].to_numpy() - true).max(axis=1)
+        reach = np.abs(true[:, "xyz".index(axis)])
+        for r, e in zip(reach, err, strict=True):
+            worst[round(r, 1)] = max(worst.get(round(r, 1), 0.0), e)
+    reach = 0.0
+    for r in sorted(worst):
+        if worst[r] > TOLERANCE_M:
+            break
+        reach = r
+    return reach
+
+
+def table(group: str, evals: dict[str, Evaluation]) -> str:
+    """The paper's layout for one group: published, paper mode, fused, smoothed."""
+    lines = [f"### {group}", "", "| method | axis | e_MAE [m] | abs(e)max [m] | σ_e [m] | μ_e [m] | lag [s] | "
+             "availability |", "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    if group in PAPER:
+        for axis, (mae, emax, sd, mu) in PAPER[group].items():
+            lines.append(f"| paper (published) | {axis} | {mae:.3f} | {emax:.3f} | {sd:.3f} | {mu:.3f} | ~0.7 | — |")
+    for mode in MODES:
+        ev = evals[mode]
+        for axis, s in ev.axes.items():
+            lines.append(f"| {mode} mode | {axis} | {s.mae:.3f} | {s.max_abs:.3f} | {s.std:.3f} | {s.mean:.3f} | "
+                         f"{ev.lag_s:.2f} | {ev.availability:.1%} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    """Run everything, print and write the tables."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--fps", type=float, default=15.0)
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--only", nargs="*", default=None)
+    args = parser.parse_args()
+    names = [n for n in RUNS if args.only is None or n in args.only]
+    CACHE.mkdir(parents=True, exist_ok=True)
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        results = list(pool.map(run, names, [args.fps] * len(names)))
+    by_name = {r["name"]: r for r in results}
+    sections = []
+    for group in dict.fromkeys(RUNS[n] for n in names):
+        members = [by_name[n] for n in names if RUNS[n] == group]
+        evals = {}
+        for mode in MODES:
+            pairs = [(r[mode][r[mode]["cone"].isin(r["monitored"])], r["truth"]) for r in members]
+            evals[mode] = evaluate_runs(group, pairs)
+        sections.append(table(group, evals))
+    unseen = []
+    for r in results:
+        df = r["fused"][~r["fused"]["cone"].isin(r["monitored"])]
+        if len(df):
+            e = errors(df.dropna(subset=["dx"]), r["truth"])
+            avail = df["dx"].notna().mean()
+            mae = e[["ex", "ey", "ez"]].abs().mean().to_numpy() if len(e) else np.full(3, np.nan)
+            unseen.append(f"| {r['name']} | {', '.join(sorted(set(df['cone'])))} | {avail:.0%} | "
+                          f"{mae[0]:.3f} | {mae[1]:.3f} | {mae[2]:.3f} |")
+    ranges = []
+    for name, axis in (("config1-procedure1", "y"), ("config1-procedure2", "x")):
+        if name in by_name:
+            ranges.append(f"| {name} | {axis} | " + " | ".join(f"{working_range(by_name[name], m, axis):.1f}"
+                                                               for m in MODES) + " |")
+    timing = [f"| {r['name']} | {r['render_s']:.0f} | {r['track_s']:.0f} | "
+              f"{r['truth']['time'].max():.0f} |" for r in results]
+    text = "\n".join([
+        "# Accuracy against the simulator's truth",
+        "",
+        f"Procedures rendered with fog 50 % and rain 30 % (all of them, not only 3 and 4 as in the paper), "
+        f"920×600, {args.fps:g} FPS per camera, cameras unsynchronised; corners by edge fit; errors at the "
+        "monitored cones. Modes: **paper** = the paper's method (camera 1 gives Δx, Δz, camera 2 Δy, Δz, "
+        "10-sample running averages); **fused** = the live rigid-body Kalman filter of all cameras (default); "
+        "**smoothed** = the same with a Rauch-Tung-Striebel pass over the recorded run. Lag by cross-correlation; "
+        "availability = share of the time with an estimate at most 0.5 s old.",
+        "",
+        *[s + "\n" for s in sections],
+        "### Working range (the paper: x within 8 m, y within 12 m)",
+        "",
+        "Largest true offset along the moving axis within which every error stays inside ±0.15 m.",
+        "",
+        "| procedure | axis | paper mode [m] | fused [m] | smoothed [m] |",
+        "| --- | --- | ---: | ---: | ---: |",
+        *ranges,
+        "",
+        "### Cones no camera sees (fused, from the rigid topside pose)",
+        "",
+        "| procedure | cones | reported | e_MAE x [m] | e_MAE y [m] | e_MAE z [m] |",
+        "| --- | --- | ---: | ---: | ---: | ---: |",
+        *unseen,
+        "",
+        "### Cost (one core per run)",
+        "",
+        "| procedure | render [s] | track [s] | simulated [s] |",
+        "| --- | ---: | ---: | ---: |",
+        *timing,
+        "",
+    ])
+    print(text)
+    if args.only is None:
+        RESULTS.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
