@@ -300,17 +300,17 @@ def demo(
     duration: Annotated[float, typer.Option(help="Seconds of the scenario to simulate.")] = DEMO_DURATION_S,
     no_viewer: Annotated[bool, typer.Option("--no-viewer", help="Do not open the viewer at the end.")] = False,
 ) -> None:
-    """Simulate configuration 2, procedure 5 in fog and rain, track it, record it, and print its accuracy."""
+    """Simulate configuration 2, procedure 5 in fog and rain, track it (fused), record it, print its accuracy."""
     from tracking.sim.command import run_simulate
     from viewer.playback import has_display
 
     scene = out / "demo"
     console.rule(f"1/3 simulate {DEMO_SCENARIO} ({duration:.0f} s)")
     run_simulate(DEMO_SCENARIO, scene, seed=None, duration=duration)
-    console.rule("2/3 track (paper mode) and record")
+    console.rule("2/3 track (all cameras fused) and record")
     rrd = out / "demo.rrd"
     csv = out / "demo-offsets.csv"
-    track(rig=scene / "rig.yaml", out=csv, mode="paper", refine=DEFAULT_REFINEMENT, rrd=rrd,
+    track(rig=scene / "rig.yaml", out=csv, mode="fused", refine=DEFAULT_REFINEMENT, rrd=rrd,
           truth=scene / "truth.csv", rejected=False)
     console.rule("3/3 accuracy against the simulator's truth")
     evaluate(runs=[csv, scene / "truth.csv"], name="demo", markdown=out / "demo-accuracy.md", plots=None)
