@@ -216,6 +216,13 @@ def log_series_styles(rec: rr.RecordingStream, cones: Iterable[str], with_truth:
                                                                       widths=1.0), static=True, recording=rec)
 
 
+def cone_state(offset: np.ndarray) -> str:
+    """'NO DATA' unless every axis is known; then within or outside the concentricity tolerance."""
+    if not np.all(np.isfinite(offset)):
+        return "NO DATA"
+    return f"within ±{TOLERANCE_M} m" if np.all(np.abs(offset) <= TOLERANCE_M) else "outside"
+
+
 @dataclass
 class StatusBoard:
     """The status panel's state: last estimate per cone, counts per camera; logged as markdown."""
@@ -230,8 +237,7 @@ class StatusBoard:
         lines = ["## Cones", "", "| cone | dx [m] | dy [m] | dz [m] | state | cameras |",
                  "|---|---:|---:|---:|---|---|"]
         for cone, e in sorted(self.latest.items()):
-            within = bool(np.all(np.abs(e.offset[np.isfinite(e.offset)]) <= TOLERANCE_M))
-            state = "within ±0.15 m" if within else "outside"
+            state = cone_state(e.offset)
             vals = " | ".join("—" if not np.isfinite(v) else f"{v:+.3f}" for v in e.offset)
             lines.append(f"| {cone} | {vals} | {state} | {', '.join(e.cameras)} |")
         lines += ["", "## Cameras", "", "| camera | frames | markers |", "|---|---:|---:|"]

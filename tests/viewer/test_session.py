@@ -114,3 +114,12 @@ def test_tracking_never_imports_viewer() -> None:
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
                 [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
             assert not any(n.split(".")[0] == "viewer" for n in names), path
+
+
+def test_cone_state_never_claims_an_unknown_cone() -> None:
+    from viewer.recording import cone_state
+
+    assert cone_state(np.array([np.nan, np.nan, np.nan])) == "NO DATA"
+    assert cone_state(np.array([0.01, np.nan, 0.0])) == "NO DATA"  # the paper's mode before camera 2 reports
+    assert cone_state(np.array([0.01, -0.02, 0.1])) == "within ±0.15 m"
+    assert cone_state(np.array([0.01, -0.2, 0.1])) == "outside"
