@@ -23,7 +23,8 @@ def analysis_blueprint(rig: Rig, with_truth: bool) -> rrb.Blueprint:
         plots += [rrb.TimeSeriesView(origin=f"errors/{axis}", name=f"error {axis} [m]") for axis in AXIS_TITLES]
     health = rrb.Tabs(*(
         rrb.TimeSeriesView(origin="health", contents=[f"health/{c.name}/{series}" for c in rig.cameras], name=title)
-        for series, title in HEALTH_SERIES.items()), name="camera health")
+        for series, title in HEALTH_SERIES.items()),
+        rrb.TimeSeriesView(origin="uncertainty", name="estimate σ [m]"), name="camera health")
     middle = rrb.Vertical(
         rrb.Spatial3DView(origin="world", name="installation (jacket frame)", eye_controls=rrb.EyeControls3D(
             position=centre + EYE_OFFSET_M, look_target=centre, eye_up=[0.0, 0.0, 1.0])),

@@ -6,7 +6,8 @@ Entity layout (the jacket frame is the world):
     world/cameras/<camera>               camera pose as the markers place it, with its pinhole
     world/cameras/<camera>/image         the frame (JPEG), with markers/, axes/, rejected/ below it
     world/estimated/<camera>/<id>        each marker's frame as that camera estimates it
-    offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, health/<camera>/..., status
+    offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, uncertainty/<axis>/<cone> (1σ),
+    health/<camera>/..., status
 """
 
 from __future__ import annotations
@@ -154,6 +155,9 @@ def log_estimate(rec: rr.RecordingStream, estimate: ConeEstimate) -> None:
     for axis, value in zip(AXES, estimate.offset, strict=True):
         if np.isfinite(value):
             rr.log(f"offsets/{axis}/{estimate.cone}/estimate", rr.Scalars(float(value)), recording=rec)
+    if estimate.covariance is not None:
+        for axis, sd in zip(AXES, np.sqrt(np.diag(estimate.covariance)), strict=True):
+            rr.log(f"uncertainty/{axis}/{estimate.cone}", rr.Scalars(float(sd)), recording=rec)
 
 
 def log_topside_pose(rec: rr.RecordingStream, latest: dict[str, ConeEstimate]) -> None:

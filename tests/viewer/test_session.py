@@ -44,6 +44,7 @@ def test_entities_and_row_counts(recorded: tuple[Path, pd.DataFrame]) -> None:
     for mid in (1, 2, 3, 4):
         assert any(p.endswith(f"/{mid}") for p in chunks if p.startswith("/world/estimated/"))
     assert "/status" in chunks and "/world/jacket/cones" in chunks
+    assert not any(p.startswith("/uncertainty") for p in chunks)  # the paper's average has no σ
     _, ages = component_rows(chunks["/health/cam-port/frame_age_s"], "Scalars:scalars")
     assert len(ages) == 2 * FRAMES - 1  # at every frame of either camera once cam-port has started
     assert max(a[0] for a in ages) == pytest.approx(1 / 30, abs=1e-3)  # cameras interleave every 1/30 s
@@ -123,3 +124,14 @@ def test_cone_state_never_claims_an_unknown_cone() -> None:
     assert cone_state(np.array([0.01, np.nan, 0.0])) == "NO DATA"  # the paper's mode before camera 2 reports
     assert cone_state(np.array([0.01, -0.02, 0.1])) == "within ±0.15 m"
     assert cone_state(np.array([0.01, -0.2, 0.1])) == "outside"
+
+
+def test_fused_recording_logs_uncertainty(installation: Path, tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, "-m", "tracking.cli", "track", "--rig", str(installation / "rig.yaml"),
+                           "-o", str(tmp_path / "o.csv"), "--rrd", str(tmp_path / "f.rrd")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    df = pd.read_csv(tmp_path / "o.csv")
+    _, sd = component_rows(chunks_by_entity(tmp_path / "f.rrd")["/uncertainty/dy/A"], "Scalars:scalars")
+    assert len(sd) == len(df)
+    np.testing.assert_allclose([v[0] for v in sd], df["sdy"], atol=1e-5)  # the estimator's 1σ, as in the CSV
