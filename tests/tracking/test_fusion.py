@@ -93,13 +93,19 @@ def test_smoother_beats_filter() -> None:
     assert smooth < 0.8 * live
 
 
+def settled_filter(the_rig: Rig, seconds: float = 3.0) -> TopsideFilter:
+    """A filter that has seen a few seconds of clean measurements."""
+    kf = TopsideFilter(the_rig)
+    for m in stream(the_rig, seconds):
+        kf.predict(m.time)
+        kf.update(m)
+    return kf
+
+
 def test_outlier_is_gated() -> None:
     the_rig = rig()
     rng = np.random.default_rng(1)
-    kf = TopsideFilter(the_rig)
-    for m in stream(the_rig, 3.0):
-        kf.predict(m.time)
-        kf.update(m)
+    kf = settled_filter(the_rig)
     before = kf.x.copy()
     flip = measurement(the_rig, "A", "ahead", 3.01, "cam0", rng, error=np.array([0.0, 1.5, 0.8]))
     kf.predict(flip.time)
@@ -111,10 +117,7 @@ def test_outlier_is_gated() -> None:
 def test_flip_alternative_is_chosen_by_the_prediction() -> None:
     the_rig = rig()
     rng = np.random.default_rng(2)
-    kf = TopsideFilter(the_rig)
-    for m in stream(the_rig, 3.0):
-        kf.predict(m.time)
-        kf.update(m)
+    kf = settled_filter(the_rig)
     good = measurement(the_rig, "A", "ahead", 3.01, "cam0", rng, choice=Choice.PAIR)
     wrong = good.offset + np.array([0.0, 1.5, 0.8])
     m = PairOffset(good.time, good.camera, good.cone, good.face, good.jacket_id, good.topside_id, good.T_W_S,
