@@ -33,6 +33,7 @@ _CV_REFINE = {
 EDGES_START = Refinement.NONE  # OpenCV refinement that Refinement.EDGES starts from (best in benchmarks/corners.py)
 DEFAULT_REFINEMENT = Refinement.EDGES  # unbiased: benchmarks/results/corners.md
 RAIN_FILTER_PX = 5  # grey opening that erases bright streaks thinner than this before a second detection pass
+RAIN_REFINE_MIN_CELL_PX = 6.0  # edge-fit on the opened image only for markers whose cells (and quiet zone) survive it
 SUBPIX_WIN = 3  # px half-window for CORNER_REFINE_SUBPIX; tuned in benchmarks/corners.py
 SUBPIX_MAX_ITER = 50
 SUBPIX_MIN_ACCURACY = 0.01  # px
@@ -102,12 +103,13 @@ class MarkerDetector:
         self._detector = cv2.aruco.ArucoDetector(self.dictionary, detector_parameters(self.refinement))
         self._kernel = np.ones((rain_filter, rain_filter), np.uint8) if rain_filter > 1 else None
 
-    def _find(self, gray: np.ndarray) -> tuple[list[np.ndarray], np.ndarray | None, list[np.ndarray]]:
+    def _find(self, gray: np.ndarray, opened: np.ndarray | None
+              ) -> tuple[list[np.ndarray], np.ndarray | None, list[np.ndarray]]:
         """Quads and ids: the plain pass, plus markers only the rain-filtered pass finds (rain cuts borders)."""
         corners, ids, rejected = self._detector.detectMarkers(gray)
-        if self._kernel is None:
+        if opened is None:
             return list(corners), ids, list(rejected)
-        corners2, ids2, _ = self._detector.detectMarkers(cv2.morphologyEx(gray, cv2.MORPH_OPEN, self._kernel))
+        corners2, ids2, _ = self._detector.detectMarkers(opened)
         if ids2 is None:
             return list(corners), ids, list(rejected)
         seen = set() if ids is None else set(ids.reshape(-1).tolist())
@@ -117,16 +119,30 @@ class MarkerDetector:
         all_ids = np.concatenate([ids.reshape(-1) if ids is not None else np.zeros(0, int), [i for _, i in extra]])
         return list(corners) + [c for c, _ in extra], all_ids.reshape(-1, 1), list(rejected)
 
+    def _refine(self, gray: np.ndarray, opened: np.ndarray | None, quads: np.ndarray) -> np.ndarray:
+        """Edge-fit corners; on the rain-filtered image where the marker's cells are wide enough to survive it."""
+        cells = self.dictionary.markerSize + 2
+        if opened is None:
+            return refine_corners_batch(gray, quads, self.camera, cells)[0]
+        side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=2), axis=2).mean(axis=1)
+        big = side / cells >= RAIN_REFINE_MIN_CELL_PX
+        out = quads.copy()
+        for mask, image in ((big, opened), (~big, gray)):
+            if mask.any():
+                out[mask] = refine_corners_batch(image, quads[mask], self.camera, cells)[0]
+        return out
+
     def detect(self, gray: np.ndarray, keep_rejected: bool = False) -> Detections:
         """Markers in one grayscale (H, W) uint8 frame."""
         if gray.ndim == 3:
             gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
-        corners, ids, rejected = self._find(gray)
+        opened = cv2.morphologyEx(gray, cv2.MORPH_OPEN, self._kernel) if self._kernel is not None else None
+        corners, ids, rejected = self._find(gray, opened)
         markers = []
         if ids is not None:
             quads = np.array([c.reshape(4, 2) for c in corners], dtype=np.float64)
-            if self.refinement == Refinement.EDGES:  # all markers of the frame in one vectorised call
-                quads, _ = refine_corners_batch(gray, quads, self.camera, self.dictionary.markerSize + 2)
+            if self.refinement == Refinement.EDGES:  # all markers of the frame in vectorised calls
+                quads = self._refine(gray, opened, quads)
             for quad, i in zip(quads, ids.reshape(-1), strict=True):
                 markers.append(MarkerDetection(id=int(i), corners=quad))
         markers.sort(key=lambda m: m.id)
