@@ -124,7 +124,7 @@ class MarkerDetector:
         cells = self.dictionary.markerSize + 2
         if opened is None:
             return refine_corners_batch(gray, quads, self.camera, cells)[0]
-        side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=2), axis=2).mean(axis=1)
+        side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
         big = side / cells >= RAIN_REFINE_MIN_CELL_PX
         out = quads.copy()
         for mask, image in ((big, opened), (~big, gray)):
