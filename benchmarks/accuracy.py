@@ -22,8 +22,8 @@ import numpy as np
 import pandas as pd
 
 from tracking.evaluate import Evaluation, errors, evaluate_runs, truth_at
-from tracking.filtering import ConeEstimate, paper_filter
-from tracking.fusion import fused_estimates, smoothed_estimates
+from tracking.filtering import ConeEstimate
+from tracking.fusion import ESTIMATORS
 from tracking.pipeline import track_rig
 from tracking.rig import load_rig
 
@@ -96,8 +96,8 @@ def run(name: str, fps: float) -> dict:
     cost_file.write_text(json.dumps(cost))
     monitored = sorted({p.cone for p in rig.all_pairs()})
     out = {"name": name, "truth": pd.read_csv(scene / "truth.csv"), "monitored": monitored, **cost}
-    for mode, estimator in (("paper", paper_filter), ("fused", fused_estimates), ("smoothed", smoothed_estimates)):
-        out[mode] = frame(list(estimator(rig, measurements)))
+    for mode in MODES:
+        out[mode] = frame(list(ESTIMATORS[mode](rig, measurements)))
     return out
 
 

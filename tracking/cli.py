@@ -13,8 +13,10 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
+from tracking.calibration import SUBPIX_WINDOW
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import EXIT_BAD_INPUT, InputError
+from tracking.fusion import ESTIMATORS
 
 app = typer.Typer(
     name="topside",
@@ -40,7 +42,8 @@ def calibrate(
     out: Annotated[Path, typer.Option("-o", "--out", help="Camera file to write (OpenCV YAML).")],
     fix_aspect: Annotated[bool, typer.Option("--fix-aspect", help="Keep fx = fy (CALIB_FIX_ASPECT_RATIO).")] = False,
     rational: Annotated[bool, typer.Option("--rational", help="8-coefficient rational distortion model.")] = False,
-    subpix_window: Annotated[int, typer.Option(help="Half-size of cornerSubPix's window, px (chessboard).")] = 5,
+    subpix_window: Annotated[int, typer.Option(help="Half-size of cornerSubPix's window, px (chessboard).")
+                             ] = SUBPIX_WINDOW,
 ) -> None:
     """Calibrate one camera from photos of a chessboard or ChArUco board."""
     from rich.table import Table
@@ -144,15 +147,6 @@ def detect(
         err_console.print(f"{n_frames} frames; markers not in the rig ignored: {summary}")
 
 
-def _modes() -> dict:
-    from tracking.filtering import paper_filter, raw_estimates
-    from tracking.fusion import fused_estimates, smoothed_estimates
-
-    return {"fused": fused_estimates, "smoothed": smoothed_estimates, "paper": paper_filter,
-            "raw": lambda rig, ms: raw_estimates(ms)}
-
-
-MODES = ("fused", "smoothed", "paper", "raw")
 
 
 @app.command()
@@ -175,9 +169,9 @@ def track(
     from tracking.report import write_offsets_csv
     from tracking.rig import load_rig
 
-    if mode not in MODES:
-        raise InputError("--mode", f"{mode!r} is not a mode (expected {', '.join(MODES)})")
-    estimator = _modes()[mode]
+    if mode not in ESTIMATORS:
+        raise InputError("--mode", f"{mode!r} is not a mode (expected {', '.join(ESTIMATORS)})")
+    estimator = ESTIMATORS[mode]
     the_rig = load_rig(rig)
     truth_df = read_truth(truth) if truth else None
     recorder = None

@@ -16,12 +16,12 @@ Mahalanobis distance. Offline, a Rauch-Tung-Striebel pass smooths the whole run.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracking.filtering import ConeEstimate
+from tracking.filtering import ConeEstimate, paper_filter, raw_estimates
 from tracking.offsets import PairOffset
 from tracking.pose import Choice
 from tracking.rig import Rig
@@ -199,8 +199,9 @@ def fused_estimates(rig: Rig, measurements: Iterable[PairOffset], tuning: Filter
     kf = TopsideFilter(rig, tuning or FilterTuning())
     for group in _frames(measurements):
         kf.predict(group[0].time)
-        accepted = [kf.update(m) for m in group]
-        if any(accepted) or kf.last_accepted:
+        for m in group:
+            kf.update(m)
+        if kf.last_accepted:  # once anything was accepted, every frame gives an estimate
             yield from kf.cone_estimates()
 
 
@@ -230,3 +231,11 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[PairOffset], tuning: Fil
     for step, x, P in zip(steps, xs, Ps, strict=True):
         out.extend(kf.cone_estimates(x, P, step.time, step.cameras))
     return out
+
+
+ESTIMATORS: dict[str, Callable[[Rig, Iterable[PairOffset]], Iterable[ConeEstimate]]] = {
+    "fused": fused_estimates,  # live, the default
+    "smoothed": smoothed_estimates,  # recorded runs
+    "paper": paper_filter,  # the paper's method, for comparison
+    "raw": lambda rig, measurements: raw_estimates(measurements),  # every camera's pair offset
+}

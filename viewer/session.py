@@ -9,6 +9,7 @@ import pandas as pd
 import rerun as rr
 
 from tracking.camera import CameraModel, load_camera
+from tracking.evaluate import truth_at
 from tracking.filtering import ConeEstimate
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
@@ -29,14 +30,6 @@ from viewer.recording import (
 )
 
 
-def _truth_series(truth: pd.DataFrame) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """cone -> (times (N,), true offsets (N, 3)) from a truth log's cone_<C>_dx/dy/dz columns."""
-    cones = {c[len("cone_"):-len("_dx")] for c in truth.columns if c.startswith("cone_") and c.endswith("_dx")}
-    times = truth["time"].to_numpy(dtype=float)
-    return {cone: (times, truth[[f"cone_{cone}_{a}" for a in ("dx", "dy", "dz")]].to_numpy(dtype=float))
-            for cone in cones}
-
-
 class Recorder:
     """Logs frames and estimates of one tracked installation into a Rerun recording."""
 
@@ -50,7 +43,8 @@ class Recorder:
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
         self.cameras: dict[str, CameraModel] = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
         self.status = StatusBoard()
-        self._truth_series = _truth_series(truth) if truth is not None else {}
+        self._truth_cones = {c[len("cone_"):-len("_dx")] for c in truth.columns
+                             if c.startswith("cone_") and c.endswith("_dx")} if truth is not None else set()
         self._last_time = 0.0
         self._last_capture: dict[str, float] = {}
         if rrd is not None:
@@ -76,11 +70,8 @@ class Recorder:
     def on_estimate(self, estimate: ConeEstimate) -> None:
         """Log one cone estimate, its error against the truth, and the status panel when due."""
         log_estimate(self.rec, estimate)
-        series = self._truth_series.get(estimate.cone)
-        if series is not None:
-            times, values = series
-            true = np.array([np.interp(estimate.time, times, values[:, i]) for i in range(3)])
-            log_error(self.rec, estimate, true)
+        if self.truth is not None and estimate.cone in self._truth_cones:
+            log_error(self.rec, estimate, truth_at(self.truth, estimate.cone, np.array([estimate.time]))[0])
         self.status.latest[estimate.cone] = estimate
         log_topside_pose(self.rec, self.status.latest)
         self.status.log_if_due(self.rec, estimate.time)
