@@ -186,7 +186,7 @@ def track(
         task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras", total=total)
 
         def measurements():
-            for result in track_rig(the_rig, refine, keep_color=recorder is not None):
+            for result in track_rig(the_rig, refine, packets=recorder is not None):
                 stats.add(result)
                 progress.advance(task)
                 if recorder is not None:

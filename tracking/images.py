@@ -21,8 +21,10 @@ class Frame:
 
     index: int  # frame number within its source, from 0
     time: float  # capture time on the common clock, s
-    gray: np.ndarray  # (H, W) uint8
+    gray: np.ndarray | None  # (H, W) uint8; None once tracked when the packet carries the image on
     bgr: np.ndarray | None = None  # (H, W, 3) uint8, kept only when asked for
+    packet: bytes | None = None  # the frame as the camera encoded it: one H.264 access unit, Annex B
+    keyframe: bool = False  # the packet decodes on its own (IDR)
 
 
 def is_image(path: str | Path) -> bool:
@@ -41,29 +43,66 @@ def read_gray(path: str | Path) -> np.ndarray:
     return image
 
 
-def video_frames(source: str | Path, time_offset: float = 0.0, keep_color: bool = False) -> Iterator[Frame]:
-    """Decode a video (file or URL) with PyAV; capture time = presentation time + time_offset."""
+def open_video(source: str | Path, options: dict[str, str] | None = None) -> av.container.InputContainer:
+    """A video container opened with PyAV; a one-line error when it cannot be."""
     try:
-        container = av.open(str(source))
+        container = av.open(str(source), options=options or {})
     except (av.error.FFmpegError, OSError) as exc:
         raise InputError(source, f"cannot be opened as a video ({exc.strerror or exc})") from None
-    with container:
-        if not container.streams.video:
-            raise InputError(source, "holds no video stream")
-        stream = container.streams.video[0]
-        stream.thread_type = "AUTO"
-        fallback_dt = 1.0 / float(stream.average_rate or 15)
-        try:
-            for index, frame in enumerate(container.decode(stream)):
-                t = float(frame.time) if frame.time is not None else index * fallback_dt
-                gray = frame.to_ndarray(format="gray")
-                bgr = frame.to_ndarray(format="bgr24") if keep_color else None
-                yield Frame(index=index, time=t + time_offset, gray=gray, bgr=bgr)
-        except av.error.FFmpegError as exc:
-            raise InputError(source, f"video is damaged after frame {index} ({exc.strerror or exc})") from None
+    if not container.streams.video:
+        container.close()
+        raise InputError(source, "holds no video stream")
+    return container
 
 
-def frames(source: str | Path, time_offset: float = 0.0, keep_color: bool = False) -> Iterator[Frame]:
+def passes_through(stream: av.video.stream.VideoStream) -> bool:
+    """True when the stream's packets can be recorded as they are: H.264 without B-frames."""
+    return stream.codec_context.name == "h264" and not stream.codec_context.has_b_frames
+
+
+def decoded_frames(container: av.container.InputContainer, source: str | Path, time_offset: float = 0.0,
+                   keep_color: bool = False, packets: bool = False) -> Iterator[Frame]:
+    """Frames of an open container; capture time = presentation time + time_offset.
+
+    With packets=True, each frame also carries its H.264 packet in Annex B (when the stream passes through).
+    """
+    stream = container.streams.video[0]
+    stream.thread_type = "AUTO"
+    fallback_dt = 1.0 / float(stream.average_rate or 15)
+    annexb = (av.bitstream.BitStreamFilterContext("h264_mp4toannexb", stream)
+              if packets and passes_through(stream) else None)
+    pending: dict[int | None, tuple[bytes, bool]] = {}  # pts -> packet, until its frame leaves the decoder
+    index = 0
+    try:
+        for packet in container.demux(stream):
+            pts, key = packet.pts, packet.is_keyframe
+            for frame in packet.decode():
+                yield _frame(frame, index, fallback_dt, time_offset, keep_color, pending.pop(frame.pts, None))
+                index += 1
+            if annexb is not None and packet.size:
+                pending[pts] = (b"".join(bytes(p) for p in annexb.filter(packet)), key)
+    except av.error.FFmpegError as exc:
+        raise InputError(source, f"video is damaged after frame {index} ({exc.strerror or exc})") from None
+
+
+def _frame(frame: av.VideoFrame, index: int, fallback_dt: float, time_offset: float, keep_color: bool,
+           packet: tuple[bytes, bool] | None) -> Frame:
+    """One decoded frame as a Frame."""
+    t = float(frame.time) if frame.time is not None else index * fallback_dt
+    return Frame(index=index, time=t + time_offset, gray=frame.to_ndarray(format="gray"),
+                 bgr=frame.to_ndarray(format="bgr24") if keep_color else None,
+                 packet=packet[0] if packet else None, keyframe=packet[1] if packet else False)
+
+
+def video_frames(source: str | Path, time_offset: float = 0.0, keep_color: bool = False,
+                 packets: bool = False) -> Iterator[Frame]:
+    """Decode a video (file or URL) with PyAV; capture time = presentation time + time_offset."""
+    with open_video(source) as container:
+        yield from decoded_frames(container, source, time_offset, keep_color, packets)
+
+
+def frames(source: str | Path, time_offset: float = 0.0, keep_color: bool = False, packets: bool = False
+           ) -> Iterator[Frame]:
     """Frames of an image file (one frame at time_offset) or a video."""
     if is_image(source):
         gray = read_gray(source)
@@ -72,4 +111,4 @@ def frames(source: str | Path, time_offset: float = 0.0, keep_color: bool = Fals
         return
     if not str(source).startswith(("rtsp:", "http:", "https:")) and not Path(source).is_file():
         raise InputError(source, "image or video not found")
-    yield from video_frames(source, time_offset, keep_color)
+    yield from video_frames(source, time_offset, keep_color, packets)

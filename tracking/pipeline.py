@@ -62,6 +62,7 @@ class CameraTracker:
     camera: CameraModel
     detector: MarkerDetector
     keep_color: bool = False
+    packets: bool = False  # keep each frame's H.264 packet for recording
     geometries: list[PairGeometry] = field(default_factory=list)
     markers: dict[int, Marker] = field(default_factory=dict)
 
@@ -70,11 +71,11 @@ class CameraTracker:
         self.markers = self.rig.marker_by_id
 
     @classmethod
-    def from_rig(cls, rig: Rig, entry: CameraEntry, refinement: Refinement, keep_color: bool = False
-                 ) -> CameraTracker:
+    def from_rig(cls, rig: Rig, entry: CameraEntry, refinement: Refinement, keep_color: bool = False,
+                 packets: bool = False) -> CameraTracker:
         """Load the camera's calibration and build its detector."""
         camera = load_camera(rig.resolve(entry.calibration))
-        return cls(rig, entry, camera, MarkerDetector(rig.dictionary, refinement, camera), keep_color)
+        return cls(rig, entry, camera, MarkerDetector(rig.dictionary, refinement, camera), keep_color, packets)
 
     def process(self, frame: Frame) -> FrameResult:
         """Detect, estimate poses and the pair offsets of one frame."""
@@ -93,18 +94,18 @@ class CameraTracker:
         source = self.entry.source
         path = self.rig.resolve(source)
         src = path if path.exists() or not source.startswith(("rtsp:", "http:", "https:")) else source
-        for frame in frames(src, self.entry.time_offset, keep_color=self.keep_color):
+        for frame in frames(src, self.entry.time_offset, keep_color=self.keep_color, packets=self.packets):
             yield self.process(frame)
 
 
 def track_rig(rig: Rig, refinement: Refinement = DEFAULT_REFINEMENT, cameras: list[str] | None = None,
-              keep_color: bool = False, on_frame: Callable[[FrameResult], None] | None = None
-              ) -> Iterator[FrameResult]:
+              keep_color: bool = False, on_frame: Callable[[FrameResult], None] | None = None,
+              packets: bool = False) -> Iterator[FrameResult]:
     """All cameras of a rig, merged into one stream ordered by capture time."""
     entries = [c for c in rig.cameras if cameras is None or c.name in cameras]
     if not entries:
         raise InputError(rig.path, "no cameras to track (expected at least one)", "cameras")
-    trackers = [CameraTracker.from_rig(rig, e, refinement, keep_color) for e in entries]
+    trackers = [CameraTracker.from_rig(rig, e, refinement, keep_color, packets) for e in entries]
     for result in heapq.merge(*(t.run() for t in trackers), key=lambda r: r.time):
         if on_frame is not None:
             on_frame(result)

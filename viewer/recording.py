@@ -4,7 +4,8 @@ Entity layout (the jacket frame is the world):
     world/jacket/markers/<id>            nominal jacket markers (static)
     world/topside                        estimated topside pose; its markers below it
     world/cameras/<camera>               camera pose as the markers place it, with its pinhole
-    world/cameras/<camera>/image         the frame (JPEG), with markers/, axes/, rejected/ below it
+    world/cameras/<camera>/image         the frame (the camera's own H.264 packet, or JPEG), with markers/, axes/,
+                                         rejected/ below it
     world/estimated/<camera>/<id>        each marker's frame as that camera estimates it
     offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, uncertainty/<axis>/<cone> (1σ),
     health/<camera>/..., status
@@ -22,6 +23,7 @@ import rerun as rr
 
 from tracking.camera import CameraModel
 from tracking.filtering import ConeEstimate
+from tracking.images import Frame
 from tracking.pipeline import FrameResult
 from tracking.pose import Choice, MarkerPose
 from tracking.rig import Rig
@@ -85,6 +87,20 @@ def encode_jpeg(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
     return buf.tobytes()
 
 
+def log_image(rec: rr.RecordingStream, path: str, frame: Frame, jpeg_quality: int = JPEG_QUALITY) -> None:
+    """The frame's pixels: its H.264 packet as a video-stream sample when it has one, else a JPEG."""
+    if frame.packet is not None:
+        rr.log(path, rr.VideoStream.from_fields(sample=frame.packet, is_keyframe=frame.keyframe), recording=rec)
+        return
+    image = frame.bgr if frame.bgr is not None else frame.gray
+    rr.log(path, rr.EncodedImage(contents=encode_jpeg(image, jpeg_quality), media_type="image/jpeg"), recording=rec)
+
+
+def log_video_codec(rec: rr.RecordingStream, name: str) -> None:
+    """Static codec of a camera whose frames are recorded as their H.264 packets."""
+    rr.log(f"world/cameras/{name}/image", rr.VideoStream(codec=rr.VideoCodec.H264), static=True, recording=rec)
+
+
 def marker_axes_px(pose: MarkerPose, camera: CameraModel, length: float) -> list[np.ndarray]:
     """Three (2, 2) image segments: the marker's x, y, z axes reprojected."""
     pts = np.array([[0, 0, 0], [length, 0, 0], [0, length, 0], [0, 0, length]], dtype=np.float64)
@@ -111,9 +127,7 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
     rr.set_time(f"frame_{name}", sequence=result.frame.index, recording=rec)
     base = f"world/cameras/{name}"
     rr.log(f"world/estimated/{name}", rr.Clear(recursive=True), recording=rec)  # no stale marker frames
-    image = result.frame.bgr if result.frame.bgr is not None else result.frame.gray
-    rr.log(f"{base}/image", rr.EncodedImage(contents=encode_jpeg(image, jpeg_quality), media_type="image/jpeg"),
-           recording=rec)
+    log_image(rec, f"{base}/image", result.frame, jpeg_quality)
     markers = result.detections.markers
     rr.log(f"{base}/image/markers", rr.LineStrips2D(
         [np.vstack([m.corners, m.corners[:1]]) for m in markers],

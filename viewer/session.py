@@ -27,6 +27,7 @@ from viewer.recording import (
     log_series_styles,
     log_topside_pose,
     log_truth,
+    log_video_codec,
 )
 
 
@@ -47,6 +48,7 @@ class Recorder:
                              if c.startswith("cone_") and c.endswith("_dx")} if truth is not None else set()
         self._last_time = 0.0
         self._last_capture: dict[str, float] = {}
+        self._video: set[str] = set()  # cameras whose codec is declared
         if rrd is not None:
             Path(rrd).parent.mkdir(parents=True, exist_ok=True)
             self.rec.save(rrd, default_blueprint=analysis_blueprint(rig, truth is not None))
@@ -60,6 +62,9 @@ class Recorder:
 
     def on_frame(self, result: FrameResult) -> None:
         """Log one processed frame."""
+        if result.frame.packet is not None and result.camera not in self._video:
+            log_video_codec(self.rec, result.camera)
+            self._video.add(result.camera)
         log_frame(self.rec, self.rig, self.cameras[result.camera], result, self.show_rejected, self.jpeg_quality)
         self.status.frames[result.camera] = self.status.frames.get(result.camera, 0) + 1
         self.status.markers[result.camera] = self.status.markers.get(result.camera, 0) + len(result.poses)

@@ -32,9 +32,12 @@ def test_entities_and_row_counts(recorded: tuple[Path, pd.DataFrame]) -> None:
     rrd, _ = recorded
     chunks = chunks_by_entity(rrd)
     for cam in ("cam-ahead", "cam-port"):
-        times, images = component_rows(chunks[f"/world/cameras/{cam}/image"], "EncodedImage:blob")
-        assert len(images) == FRAMES
+        times, samples = component_rows(chunks[f"/world/cameras/{cam}/image"], "VideoStream:sample")
+        assert len(samples) == FRAMES  # the camera's own H.264 packets, one per frame
         assert np.all(np.diff(times) > 0)
+        _, keys = component_rows(chunks[f"/world/cameras/{cam}/image"], "VideoStream:is_keyframe")
+        assert keys[0][0]
+        assert decoded_count(samples) == FRAMES
         _, strips = component_rows(chunks[f"/world/cameras/{cam}/image/markers"], "LineStrips2D:strips")
         assert all(len(s) == 2 for s in strips)  # both markers of the pair outlined in every frame
         _, pinhole = component_rows(chunks[f"/world/cameras/{cam}"], "Pinhole:image_from_camera")
@@ -48,6 +51,15 @@ def test_entities_and_row_counts(recorded: tuple[Path, pd.DataFrame]) -> None:
     _, ages = component_rows(chunks["/health/cam-port/frame_age_s"], "Scalars:scalars")
     assert len(ages) == 2 * FRAMES - 1  # at every frame of either camera once cam-port has started
     assert max(a[0] for a in ages) == pytest.approx(1 / 30, abs=1e-3)  # cameras interleave every 1/30 s
+
+
+def decoded_count(samples: list) -> int:
+    """Frames an H.264 decoder gets out of recorded video-stream samples."""
+    import av
+
+    codec = av.CodecContext.create("h264", "r")
+    n = sum(len(codec.decode(av.Packet(bytes(np.asarray(s[0], dtype=np.uint8))))) for s in samples)
+    return n + len(codec.decode(None))
 
 
 def test_topside_pose_follows_the_offsets(recorded: tuple[Path, pd.DataFrame]) -> None:
