@@ -233,6 +233,69 @@ def view(
     open_viewer(recording, web=web, bind=bind)
 
 
+LIVE_SEGMENT_MIN = 10.0
+
+
+@app.command()
+def live(
+    rig: Annotated[Path, typer.Option(help="Rig file; each camera's source is a device index, a stream URL "
+                                           "(rtsp://, http://) or a video file replayed at its frame rate.")],
+    rrd: Annotated[Path, typer.Option(help="Recording to write, in segments <stem>-NNN.rrd.")
+                   ] = Path("recordings/live.rrd"),
+    out: Annotated[Path, typer.Option("-o", "--out", help="Offsets CSV, written as they are measured.")
+                   ] = Path("recordings/live-offsets.csv"),
+    spawn: Annotated[bool, typer.Option("--spawn", help="Stream to a native viewer.")] = False,
+    web: Annotated[bool, typer.Option("--web", help="Serve the web viewer (a tablet on the stern).")] = False,
+    bind: Annotated[str, typer.Option(help="Address the web viewer listens on.")] = "127.0.0.1",
+    stale: Annotated[float, typer.Option(help="Seconds after which a cone shows NO DATA.")] = 0.5,
+    segment_minutes: Annotated[float, typer.Option(help="Minutes of capture time per recording file.")
+                               ] = LIVE_SEGMENT_MIN,
+    speed: Annotated[float, typer.Option(help="Replay speed of video files (1: real time; inf: flat out).")] = 1.0,
+    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds of capture time.")] = None,
+) -> None:
+    """Track every camera live, fuse them, record, and stream to the superintendent's view."""
+    from tracking.live import LiveTracker
+    from tracking.report import write_offsets_csv
+    from tracking.rig import load_rig
+    from viewer.playback import start_live_viewer
+    from viewer.session import Recorder
+
+    if stale <= 0 or segment_minutes <= 0 or speed <= 0:
+        raise InputError("--stale/--segment-minutes/--speed", "must be positive")
+    if spawn and web:
+        raise InputError("--spawn/--web", "choose one viewer")
+    the_rig = load_rig(rig)
+    viewer_url, viewer_process = start_live_viewer(web, bind) if (spawn or web) else (None, None)
+    if web:
+        console.print(f"web viewer: http://{bind}:9090/?url={viewer_url}")
+    recorder = Recorder(the_rig, rrd, viewer=viewer_url, segment_s=segment_minutes * 60, stale_s=stale)
+    start: list[float] = []
+
+    def estimates(tracker: LiveTracker):
+        for update in tracker.updates():
+            recorder.on_update(update)
+            for event in update.events:
+                err_console.print(f"{event.camera}: {event.state}" + (f" ({event.detail})" if event.detail else ""))
+            yield from update.estimates
+            if update.results:
+                start.append(update.results[0].time) if not start else None
+                if duration is not None and update.results[-1].time - start[0] >= duration:
+                    return
+
+    n_rows = 0
+    try:
+        with LiveTracker(the_rig, speed=speed) as tracker:
+            console.print(f"live: {len(tracker.names)} cameras; Ctrl-C stops and keeps everything recorded")
+            n_rows = write_offsets_csv(out, estimates(tracker))
+    except KeyboardInterrupt:
+        err_console.print("stopped")
+    finally:
+        recorder.close()
+        if viewer_process is not None and not spawn:
+            viewer_process.terminate()
+    console.print(f"wrote {n_rows} rows to {out}; recording {rrd.with_name(rrd.stem + '-*.rrd')}")
+
+
 @app.command()
 def simulate(
     scenario: Annotated[str, typer.Argument(help="Scenario YAML file or built-in name (e.g. config2-procedure5).")],

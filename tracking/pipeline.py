@@ -27,6 +27,7 @@ class FrameResult:
     poses: dict[int, MarkerPose]  # rig markers only, by id
     offsets: list[PairOffset]
     unknown_ids: list[int]  # detected ids that the rig does not list
+    tracked: bool = True  # False: recorded but not searched, to keep up in real time
 
     @property
     def time(self) -> float:
@@ -88,6 +89,10 @@ class CameraTracker:
         unknown = [d.id for d in detections.markers if d.id not in self.markers]
         offsets = frame_offsets(self.geometries, poses, self.entry.name, frame.time)
         return FrameResult(self.entry.name, frame, detections, poses, offsets, unknown)
+
+    def skip(self, frame: Frame) -> FrameResult:
+        """A frame recorded but not searched for markers (the tracker is behind real time)."""
+        return FrameResult(self.entry.name, frame, Detections([]), {}, [], [], tracked=False)
 
     def run(self) -> Iterator[FrameResult]:
         """Every frame of the camera's source, processed."""

@@ -126,8 +126,10 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
     set_capture_time(rec, result.time)
     rr.set_time(f"frame_{name}", sequence=result.frame.index, recording=rec)
     base = f"world/cameras/{name}"
-    rr.log(f"world/estimated/{name}", rr.Clear(recursive=True), recording=rec)  # no stale marker frames
     log_image(rec, f"{base}/image", result.frame, jpeg_quality)
+    if not result.tracked:  # recorded only, to keep up: its overlays stay as they were
+        return
+    rr.log(f"world/estimated/{name}", rr.Clear(recursive=True), recording=rec)  # no stale marker frames
     markers = result.detections.markers
     rr.log(f"{base}/image/markers", rr.LineStrips2D(
         [np.vstack([m.corners, m.corners[:1]]) for m in markers],

@@ -1,7 +1,9 @@
-"""A recording session: the tracker's stream of results in, a Rerun .rrd file out."""
+"""A recording session: the tracker's stream of results in, a Rerun recording out (file, live viewer, or both)."""
 
 from __future__ import annotations
 
+import csv
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +13,7 @@ import rerun as rr
 from tracking.camera import CameraModel, load_camera
 from tracking.evaluate import truth_at
 from tracking.filtering import ConeEstimate
+from tracking.live import STALE_S, LiveUpdate
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
 from viewer.blueprint import analysis_blueprint
@@ -23,54 +26,139 @@ from viewer.recording import (
     log_estimate,
     log_frame,
     log_frame_ages,
+    log_image,
     log_rig,
     log_series_styles,
     log_topside_pose,
     log_truth,
     log_video_codec,
+    set_capture_time,
 )
+from viewer.superintendent import (
+    cone_reading,
+    log_camera_health,
+    log_cone_reading,
+    log_target_circle,
+    superintendent_blueprint,
+)
+
+BOARD_PERIOD_S = 0.2  # the superintendent's figures refresh this often (capture time)
+BLUEPRINT_MIN_PERIOD_S = 30.0  # a changed camera-per-cone choice re-sends the live layout at most this often
 
 
 class Recorder:
-    """Logs frames and estimates of one tracked installation into a Rerun recording."""
+    """Logs frames and estimates of one tracked installation into a Rerun recording.
+
+    rrd: file to write; with segment_s, a new file <stem>-NNN.rrd every segment_s of capture time, listed in
+    <stem>.segments.csv. viewer: gRPC URL of a viewer to stream to as well (live).
+    """
 
     def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
                  show_rejected: bool = False, recording_id: str | None = None,
-                 jpeg_quality: int = JPEG_QUALITY) -> None:
+                 jpeg_quality: int = JPEG_QUALITY, viewer: str | None = None, segment_s: float | None = None,
+                 stale_s: float = STALE_S) -> None:
         self.rig = rig
         self.truth = truth
         self.show_rejected = show_rejected
         self.jpeg_quality = jpeg_quality
+        self.stale_s = stale_s
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
         self.cameras: dict[str, CameraModel] = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
+        self.cones = sorted({p.cone for p in rig.all_pairs()} | set(rig.cones))
         self.status = StatusBoard()
         self._truth_cones = {c[len("cone_"):-len("_dx")] for c in truth.columns
                              if c.startswith("cone_") and c.endswith("_dx")} if truth is not None else set()
         self._last_time = 0.0
         self._last_capture: dict[str, float] = {}
         self._video: set[str] = set()  # cameras whose codec is declared
-        if rrd is not None:
-            Path(rrd).parent.mkdir(parents=True, exist_ok=True)
-            self.rec.save(rrd, default_blueprint=analysis_blueprint(rig, truth is not None))
-        cones = sorted({p.cone for p in rig.all_pairs()} | set(rig.cones))
-        log_rig(self.rec, rig)
+        self._gop: dict[str, list[FrameResult]] = {}  # frames since each camera's newest keyframe
+        self._viewer = viewer
+        self._rrd = Path(rrd) if rrd is not None else None
+        self._segment_s = segment_s
+        self._segments: list[list] = []  # [file, first capture time, last capture time]
+        self._measured: Counter[tuple[str, str]] = Counter()  # (cone, camera) -> pair offsets
+        self._cone_cameras: dict[str, str] = {}
+        self._blueprint_sent = -np.inf
+        self._board_logged = -np.inf
+        if self._rrd is not None:
+            self._rrd.parent.mkdir(parents=True, exist_ok=True)
+        self._open(self._segment_path(0) if segment_s else self._rrd)
+
+    def _segment_path(self, index: int) -> Path | None:
+        """File of the index-th segment."""
+        return None if self._rrd is None else self._rrd.with_name(f"{self._rrd.stem}-{index:03d}.rrd")
+
+    def _open(self, path: Path | None) -> None:
+        """Attach the sinks (a file and/or a viewer) and log everything static."""
+        sinks: list = [rr.FileSink(path)] if path is not None else []
+        if self._viewer is not None:
+            sinks.append(rr.GrpcSink(self._viewer))
+        if sinks:
+            self.rec.set_sinks(*sinks, default_blueprint=analysis_blueprint(self.rig, self.truth is not None))
+        if path is not None:
+            self._segments.append([path.name, None, None])
+        log_rig(self.rec, self.rig)
         for name, cam in self.cameras.items():
             log_camera_model(self.rec, name, cam)
-        log_series_styles(self.rec, cones, truth is not None)
-        if truth is not None:
-            log_truth(self.rec, truth, cones)
+        for name in self._video:
+            log_video_codec(self.rec, name)
+        log_series_styles(self.rec, self.cones, self.truth is not None)
+        for cone in self.cones:
+            log_target_circle(self.rec, cone)
+        if self.truth is not None and len(self._segments) <= 1:
+            log_truth(self.rec, self.truth, self.cones)
+
+    def _rotate_if_due(self, t: float) -> None:
+        """Start the next segment file when this one spans segment_s; it opens with every camera's current GOP."""
+        if not self._segment_s or not self._segments:
+            return
+        seg = self._segments[-1]
+        if seg[1] is None or t - seg[1] < self._segment_s:
+            return
+        self._open(self._segment_path(len(self._segments)))
+        for results in self._gop.values():  # the frames a decoder needs before the next keyframe
+            for r in results:
+                set_capture_time(self.rec, r.time)
+                rr.set_time(f"frame_{r.camera}", sequence=r.frame.index, recording=self.rec)
+                log_image(self.rec, f"world/cameras/{r.camera}/image", r.frame, self.jpeg_quality)
+        self._write_index()
+
+    def _write_index(self) -> None:
+        """<stem>.segments.csv: every segment's file and capture-time span."""
+        if self._rrd is None or not self._segment_s:
+            return
+        with open(self._rrd.with_name(f"{self._rrd.stem}.segments.csv"), "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["file", "start", "end"])
+            w.writerows(self._segments)
+
+    def _note_time(self, t: float) -> None:
+        """Extend the current segment's span."""
+        if self._segments:
+            seg = self._segments[-1]
+            seg[1] = t if seg[1] is None else min(seg[1], t)
+            seg[2] = t if seg[2] is None else max(seg[2], t)
 
     def on_frame(self, result: FrameResult) -> None:
         """Log one processed frame."""
-        if result.frame.packet is not None and result.camera not in self._video:
-            log_video_codec(self.rec, result.camera)
-            self._video.add(result.camera)
+        self._rotate_if_due(result.time)
+        self._note_time(result.time)
+        if result.frame.packet is not None:
+            if result.camera not in self._video:
+                log_video_codec(self.rec, result.camera)
+                self._video.add(result.camera)
+            gop = self._gop.setdefault(result.camera, [])
+            if result.frame.keyframe:
+                gop.clear()
+            gop.append(result)
         log_frame(self.rec, self.rig, self.cameras[result.camera], result, self.show_rejected, self.jpeg_quality)
         self.status.frames[result.camera] = self.status.frames.get(result.camera, 0) + 1
         self.status.markers[result.camera] = self.status.markers.get(result.camera, 0) + len(result.poses)
         self._last_time = max(self._last_time, result.time)
         self._last_capture[result.camera] = result.time
         log_frame_ages(self.rec, result.time, self._last_capture)
+        for m in result.offsets:
+            self._measured[(m.cone, m.camera)] += 1
 
     def on_estimate(self, estimate: ConeEstimate) -> None:
         """Log one cone estimate, its error against the truth, and the status panel when due."""
@@ -81,8 +169,43 @@ class Recorder:
         log_topside_pose(self.rec, self.status.latest)
         self.status.log_if_due(self.rec, estimate.time)
 
+    def on_update(self, update: LiveUpdate) -> None:
+        """Log a live update: its frames and estimates, then the superintendent's figures and camera table."""
+        for result in update.results:
+            self.on_frame(result)
+        for estimate in update.estimates:
+            self.on_estimate(estimate)
+        if update.now - self._board_logged < BOARD_PERIOD_S:
+            return
+        self._board_logged = update.now
+        for cone in self.cones:
+            reading = cone_reading(self.status.latest.get(cone), cone, update.now, update.last_measurement,
+                                   self.stale_s)
+            log_cone_reading(self.rec, reading, update.now)
+        log_camera_health(self.rec, update.cameras, update.now)
+        self._send_layout_if_changed(update.now)
+
+    def cone_cameras(self) -> dict[str, str]:
+        """The camera that measured each cone most often."""
+        best: dict[str, tuple[int, str]] = {}
+        for (cone, camera), n in self._measured.items():
+            if n > best.get(cone, (0, ""))[0]:
+                best[cone] = (n, camera)
+        return {cone: camera for cone, (_, camera) in best.items()}
+
+    def _send_layout_if_changed(self, now: float) -> None:
+        """The superintendent's layout: at once, then again when the camera that best shows a cone changes."""
+        mapping = self.cone_cameras()
+        first = self._blueprint_sent == -np.inf
+        if first or (mapping != self._cone_cameras and (not self._cone_cameras
+                                                         or now - self._blueprint_sent >= BLUEPRINT_MIN_PERIOD_S)):
+            self.rec.send_blueprint(superintendent_blueprint(self.rig, mapping), make_active=True, make_default=False)
+            self._cone_cameras = mapping
+            self._blueprint_sent = now
+
     def close(self) -> None:
         """Final status and flush to disk."""
         self.status.log_if_due(self.rec, self._last_time, force=True)
+        self._write_index()
         self.rec.flush()
         self.rec.disconnect()

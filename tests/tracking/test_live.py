@@ -1,0 +1,97 @@
+"""The live path: worker processes per camera, capture-time order, the same fusion as `topside track`."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.conftest import FRAMES
+from tracking.fusion import fused_estimates
+from tracking.images import Frame
+from tracking.live import LiveTracker
+from tracking.pipeline import track_rig
+from tracking.rig import load_rig
+from tracking.sources import (
+    FROZEN_AFTER_S,
+    CameraState,
+    FreezeDetector,
+    H264Encoder,
+    SourceKind,
+    source_kind,
+    uses_wall_clock,
+)
+
+
+def run_live(rig_path: Path, speed: float) -> list:
+    """Every update of a live run over the rig's files."""
+    with LiveTracker(load_rig(rig_path), speed=speed) as tracker:
+        return list(tracker.updates())
+
+
+def test_flat_out_replay_equals_offline_fusion(installation: Path) -> None:
+    updates = run_live(installation / "rig.yaml", speed=math.inf)
+    results = [r for u in updates for r in u.results]
+    assert len(results) == 2 * FRAMES and all(r.tracked for r in results)
+    assert [r.time for r in results] == sorted(r.time for r in results)  # fused in capture-time order
+    assert all(r.frame.packet is not None and r.frame.gray is None for r in results)  # pixels stay in the worker
+    live = [e for u in updates for e in u.estimates]
+    rig = load_rig(installation / "rig.yaml")
+    offline = list(fused_estimates(rig, (m for r in track_rig(rig) for m in r.offsets)))
+    assert len(live) == len(offline) > 0
+    for a, b in zip(live, offline, strict=True):
+        assert (a.time, a.cone) == (b.time, b.cone)
+        np.testing.assert_allclose(a.offset, b.offset, atol=1e-9, equal_nan=True)
+    final = updates[-1].cameras
+    assert {h.state for h in final.values()} == {CameraState.ENDED}
+    assert all(h.frames == FRAMES for h in final.values())
+
+
+def test_real_time_replay_keeps_the_frame_rate(installation: Path) -> None:
+    updates = run_live(installation / "rig.yaml", speed=1.0)
+    results = [r for u in updates for r in u.results]
+    assert len(results) == 2 * FRAMES  # every frame recorded, searched or not
+    health = updates[-1].cameras["cam-port"]
+    assert health.fps == pytest.approx(15.0, rel=0.05)  # from capture times, not processing times
+
+
+def test_a_missing_camera_does_not_stop_the_others(installation: Path, tmp_path: Path) -> None:
+    text = (installation / "rig.yaml").read_text().replace("cam-port.mp4", "unplugged.mp4")
+    rig = tmp_path / "rig.yaml"
+    rig.write_text(text.replace("calibration/", f"{installation}/calibration/"))
+    (tmp_path / "cam-ahead.mp4").symlink_to(installation / "cam-ahead.mp4")
+    updates = run_live(rig, speed=math.inf)
+    events = [e for u in updates for e in u.events if e.camera == "cam-port"]
+    assert events[-1].state == CameraState.ENDED and "not found" in events[-1].detail
+    assert sum(len(u.results) for u in updates) == FRAMES  # cam-ahead tracked to its end
+    assert {e.cameras for u in updates for e in u.estimates} <= {("cam-ahead",), ()}
+
+
+def test_source_kinds_and_clocks(installation: Path) -> None:
+    assert source_kind("0") == SourceKind.DEVICE
+    assert source_kind("rtsp://10.0.0.5/stream1") == SourceKind.STREAM
+    assert source_kind("videos/cam.mp4") == SourceKind.FILE
+    assert not uses_wall_clock(load_rig(installation / "rig.yaml"))
+
+
+def test_freeze_is_noticed_after_its_limit() -> None:
+    detector = FreezeDetector()
+    still = np.full((60, 80), 100, np.uint8)
+    frozen = [detector.frozen(Frame(i, i / 10, still)) for i in range(15)]
+    assert frozen.index(True) == round(FROZEN_AFTER_S * 10)
+    assert not detector.frozen(Frame(15, 1.5, still + 1))  # the image moves again
+
+
+def test_raw_frames_are_encoded_to_decodable_h264() -> None:
+    import av
+
+    encoder = H264Encoder(160, 96, fps=10)
+    frames = [np.random.default_rng(i).integers(0, 255, (96, 160), np.uint8) for i in range(25)]
+    packets = [encoder.encode(f) for f in frames]
+    assert packets[0][1] and all(p[0].startswith(b"\x00\x00\x00\x01") for p in packets if p[0])  # Annex B
+    decoder = av.CodecContext.create("h264", "r")
+    decoded = [f for data, _ in packets if data for f in decoder.decode(av.Packet(data))]
+    decoded += decoder.decode(None)
+    assert len(decoded) == 25 and decoded[0].width == 160

@@ -1,0 +1,205 @@
+"""Live camera sources: a device index, an RTSP/HTTP stream, or a video file replayed at its own frame rate.
+
+Capture times: a replayed file keeps its presentation times plus the camera's time_offset (the same clock as
+`topside track`), paced against the wall clock; devices and streams are stamped on the Unix wall clock when a
+frame arrives (streams: their presentation times anchored to the wall clock at the first frame, so network
+jitter does not move them), plus time_offset. One rig does not mix the two clocks.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from enum import StrEnum
+from fractions import Fraction
+from pathlib import Path
+
+import av
+import cv2
+import numpy as np
+
+from tracking.errors import InputError
+from tracking.images import Frame, decoded_frames, frames, open_video
+from tracking.rig import CameraEntry, Rig
+
+STREAM_PREFIXES = ("rtsp:", "rtsps:", "http:", "https:", "udp:", "tcp:", "srt:")
+STREAM_OPTIONS = {"rtsp_transport": "tcp", "timeout": "5000000"}  # µs: a dead stream raises instead of hanging
+ENCODE_BITRATE = 2_000_000  # bit/s of H.264 made from raw device frames: 0.9 GB per camera-hour
+ENCODE_KEYFRAME_S = 2.0  # a recording segment or a late viewer waits at most this for a decodable frame
+FROZEN_AFTER_S = 1.0  # identical frames for this long: the camera is frozen
+FINGERPRINT_STEP = 8  # px between the samples that fingerprint a frame
+
+
+class SourceKind(StrEnum):
+    """Where a camera's frames come from."""
+
+    DEVICE = "device"
+    STREAM = "stream"
+    FILE = "file"
+
+
+class CameraState(StrEnum):
+    """A camera's condition as the live tracker sees it."""
+
+    STARTING = "starting"
+    LIVE = "live"
+    FROZEN = "frozen"  # frames arrive but do not change
+    LOST = "lost"  # no frames (unplugged, stream down); retried
+    ENDED = "ended"  # a replayed file reached its end
+
+
+@dataclass(frozen=True)
+class SourceEvent:
+    """A change of a camera's state, with the wall-clock time it was seen."""
+
+    camera: str
+    state: CameraState
+    wall_time: float
+    detail: str = ""
+    first_time: float | None = None  # with "ready" from a file: the capture time of its first frame
+
+
+def source_kind(source: str) -> SourceKind:
+    """A device index (digits), a stream URL, or a file path."""
+    if source.strip().isdigit():
+        return SourceKind.DEVICE
+    if source.lower().startswith(STREAM_PREFIXES):
+        return SourceKind.STREAM
+    return SourceKind.FILE
+
+
+def uses_wall_clock(rig: Rig) -> bool:
+    """True when the rig's cameras are live (Unix time); a one-line error when live and files are mixed."""
+    kinds = {source_kind(c.source) != SourceKind.FILE for c in rig.cameras}
+    if len(kinds) > 1:
+        raise InputError(rig.path, "mixes video files with live devices or streams (their clocks differ; "
+                                   "expected all files or all live)", "cameras.source")
+    return kinds == {True}
+
+
+@dataclass
+class Pacer:
+    """Replays capture times against the wall clock: time t is due at t0 + (t - origin) / speed (inf: no waiting)."""
+
+    t0: float  # wall time at which capture time `origin` is due
+    speed: float = 1.0
+    origin: float = 0.0
+
+    def wait(self, t: float) -> None:
+        """Sleep until capture time t is due."""
+        if np.isfinite(self.speed):
+            delay = self.t0 + (t - self.origin) / self.speed - time.time()
+            if delay > 0:
+                time.sleep(delay)
+
+    def now(self) -> float:
+        """The capture time that is due now."""
+        return self.origin + (time.time() - self.t0) * self.speed
+
+
+class H264Encoder:
+    """Encodes raw frames into H.264 packets (Annex B, no B-frames) so raw sources record as video too."""
+
+    def __init__(self, width: int, height: int, fps: float = 30.0, bitrate: int = ENCODE_BITRATE) -> None:
+        self.codec = av.CodecContext.create("libx264", "w")
+        self.codec.width, self.codec.height = width, height
+        self.codec.pix_fmt = "yuv420p"
+        self.codec.time_base = Fraction(1, 1000)
+        self.codec.bit_rate = bitrate
+        keyint = max(1, round(fps * ENCODE_KEYFRAME_S))
+        self.codec.options = {"preset": "ultrafast", "tune": "zerolatency",
+                              "x264-params": f"keyint={keyint}:bframes=0:repeat-headers=1"}
+        self._n = 0
+
+    def encode(self, image: np.ndarray) -> tuple[bytes, bool]:
+        """(packet, keyframe) of one (H, W) grey or (H, W, 3) BGR frame."""
+        fmt = "gray" if image.ndim == 2 else "bgr24"
+        frame = av.VideoFrame.from_ndarray(image, format=fmt).reformat(format="yuv420p")
+        frame.pts = self._n
+        self._n += 1
+        packets = self.codec.encode(frame)
+        return b"".join(bytes(p) for p in packets), any(p.is_keyframe for p in packets)
+
+
+def device_frames(index: int, time_offset: float, clock: Callable[[], float] = time.time) -> Iterator[Frame]:
+    """Frames of a local camera, stamped on the wall clock as they are grabbed, with H.264 packets."""
+    capture = cv2.VideoCapture(index)
+    if not capture.isOpened():
+        raise InputError(f"device {index}", "cannot be opened (expected a connected camera)")
+    encoder = None
+    n = 0
+    try:
+        while True:
+            ok = capture.grab()
+            t = clock() + time_offset
+            ok, bgr = capture.retrieve() if ok else (False, None)
+            if not ok:
+                return
+            if encoder is None:
+                encoder = H264Encoder(bgr.shape[1], bgr.shape[0], capture.get(cv2.CAP_PROP_FPS) or 30.0)
+            packet, key = encoder.encode(bgr)
+            yield Frame(index=n, time=t, gray=cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY), packet=packet or None,
+                        keyframe=key)
+            n += 1
+    finally:
+        capture.release()
+
+
+def stream_frames(url: str, time_offset: float, clock: Callable[[], float] = time.time) -> Iterator[Frame]:
+    """Frames of a network stream: presentation times anchored to the wall clock at the first frame."""
+    with open_video(url, STREAM_OPTIONS) as container:
+        anchor = None
+        for frame in decoded_frames(container, url, 0.0, packets=True):
+            anchor = clock() - frame.time if anchor is None else anchor
+            yield Frame(index=frame.index, time=anchor + frame.time + time_offset, gray=frame.gray,
+                        packet=frame.packet, keyframe=frame.keyframe)
+
+
+def file_frames(path: Path, time_offset: float, pacer: Pacer) -> Iterator[Frame]:
+    """A video file replayed at its own frame rate (or faster): each frame waits until it is due."""
+    for frame in frames(path, time_offset, packets=True):
+        pacer.wait(frame.time)
+        yield frame
+
+
+def camera_frames(rig: Rig, entry: CameraEntry, pacer: Pacer) -> Iterator[Frame]:
+    """The frames of one camera of the rig, whatever its source."""
+    kind = source_kind(entry.source)
+    if kind == SourceKind.DEVICE:
+        return device_frames(int(entry.source), entry.time_offset)
+    if kind == SourceKind.STREAM:
+        return stream_frames(entry.source, entry.time_offset)
+    return file_frames(rig.resolve(entry.source), entry.time_offset, pacer)
+
+
+def first_capture_time(rig: Rig, entry: CameraEntry) -> float | None:
+    """Capture time of a file's first frame (None for live sources or an unreadable file)."""
+    if source_kind(entry.source) != SourceKind.FILE:
+        return None
+    try:
+        return next(iter(frames(rig.resolve(entry.source), entry.time_offset))).time
+    except (InputError, StopIteration):
+        return None
+
+
+def fingerprint(gray: np.ndarray) -> bytes:
+    """A cheap signature of a frame's content: equal for repeated (frozen) frames."""
+    return gray[::FINGERPRINT_STEP, ::FINGERPRINT_STEP].tobytes()
+
+
+@dataclass
+class FreezeDetector:
+    """Tells when a camera keeps delivering the same image."""
+
+    last: bytes = b""
+    since: float | None = None  # capture time the current image first appeared
+
+    def frozen(self, frame: Frame) -> bool:
+        """True while the frame repeats the previous image for FROZEN_AFTER_S or more."""
+        assert frame.gray is not None
+        fp = fingerprint(frame.gray)
+        if fp != self.last or self.since is None:
+            self.last, self.since = fp, frame.time
+            return False
+        return frame.time - self.since >= FROZEN_AFTER_S
