@@ -80,6 +80,7 @@ class Recorder:
         self._cone_cameras: dict[str, str] = {}
         self._blueprint_sent = -np.inf
         self._board_logged = -np.inf
+        self._last_update: LiveUpdate | None = None
         if self._rrd is not None:
             self._rrd.parent.mkdir(parents=True, exist_ok=True)
         self._open(self._segment_path(0) if segment_s else self._rrd)
@@ -175,8 +176,12 @@ class Recorder:
             self.on_frame(result)
         for estimate in update.estimates:
             self.on_estimate(estimate)
-        if update.now - self._board_logged < BOARD_PERIOD_S:
-            return
+        self._last_update = update
+        if update.now - self._board_logged >= BOARD_PERIOD_S:
+            self._log_board(update)
+
+    def _log_board(self, update: LiveUpdate) -> None:
+        """Every cone's reading and the camera table at the update's live time."""
         self._board_logged = update.now
         for cone in self.cones:
             reading = cone_reading(self.status.latest.get(cone), cone, update.now, update.last_measurement,
@@ -206,6 +211,8 @@ class Recorder:
     def close(self) -> None:
         """Final status and flush to disk."""
         self.status.log_if_due(self.rec, self._last_time, force=True)
+        if self._last_update is not None:
+            self._log_board(self._last_update)
         self._write_index()
         self.rec.flush()
         self.rec.disconnect()

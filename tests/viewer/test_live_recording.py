@@ -1,0 +1,64 @@
+"""The live recording: segments that each open on their own, the superintendent's figures, NO DATA when stale."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tracking.filtering import ConeEstimate
+from viewer.readback import chunks_by_entity, component_rows
+from viewer.superintendent import ConeState, cone_markdown, cone_reading
+
+
+@pytest.fixture(scope="module")
+def live_run(installation: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("live")
+    proc = subprocess.run([sys.executable, "-m", "tracking.cli", "live", "--rig", str(installation / "rig.yaml"),
+                           "--rrd", str(out / "live.rrd"), "-o", str(out / "offsets.csv"), "--speed", "inf",
+                           "--segment-minutes", str(0.25 / 60)], capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def test_segments_each_open_on_their_own(live_run: Path) -> None:
+    index = pd.read_csv(live_run / "live.segments.csv")
+    assert len(index) >= 3  # 0.8 s of video in 0.25 s segments
+    assert (index["start"].iloc[1:].to_numpy() >= index["end"].iloc[:-1].to_numpy() - 0.25).all()
+    for name in index["file"]:
+        chunks = chunks_by_entity(live_run / name)
+        for cam in ("cam-ahead", "cam-port"):
+            assert component_rows(chunks[f"/world/cameras/{cam}"], "Pinhole:image_from_camera")[1]  # static again
+            _, keys = component_rows(chunks[f"/world/cameras/{cam}/image"], "VideoStream:is_keyframe")
+            assert keys and keys[0][0]  # every segment starts its video with a keyframe
+        assert "/superintendent/cones/A" in chunks
+
+
+def test_superintendent_figures_follow_the_csv(live_run: Path) -> None:
+    df = pd.read_csv(live_run / "offsets.csv").dropna()
+    last = pd.read_csv(live_run / "live.segments.csv")["file"].iloc[-1]
+    _, docs = component_rows(chunks_by_entity(live_run / last)["/superintendent/cones/A"], "TextDocument:text")
+    final = docs[-1][0]
+    a = df[df.cone == "A"].iloc[-1]
+    assert f"{np.hypot(a.dx, a.dy) * 1000:.0f} mm" in final
+    _, table = component_rows(chunks_by_entity(live_run / last)["/superintendent/cameras"], "TextDocument:text")
+    assert "cam-ahead" in table[-1][0] and "ended" in table[-1][0]
+
+
+def estimate(offset: list[float], sd: float = 0.005) -> ConeEstimate:
+    return ConeEstimate(10.0, "A", np.array(offset), ("cam",), np.eye(3) * sd**2)
+
+
+def test_cone_states() -> None:
+    assert cone_reading(estimate([0.03, 0.04, 1.0]), "A", 10.1, 10.05).state == ConeState.GREEN
+    assert cone_reading(estimate([0.09, 0.10, 0.0]), "A", 10.1, 10.05).concentricity == pytest.approx(0.1345, abs=1e-4)
+    assert cone_reading(estimate([0.09, 0.10, 0.0], sd=0.02), "A", 10.1, 10.05).state == ConeState.AMBER
+    assert cone_reading(estimate([0.12, 0.10, 0.0]), "A", 10.1, 10.05).state == ConeState.RED
+    stale = cone_reading(estimate([0.0, 0.0, 0.0]), "A", 10.8, 10.2)
+    assert stale.state == ConeState.NO_DATA and "NO DATA" in cone_markdown(stale)
+    assert cone_reading(estimate([np.nan] * 3), "A", 10.1, 10.05).state == ConeState.NO_DATA
+    assert cone_reading(None, "A", 10.1, None).state == ConeState.NO_DATA
