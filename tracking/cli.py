@@ -223,14 +223,22 @@ def track(
 
 @app.command()
 def view(
-    recording: Annotated[Path, typer.Argument(help="A Rerun recording (.rrd).")],
+    recording: Annotated[Path, typer.Argument(help="A Rerun recording (.rrd), or a segmented one (its .rrd name "
+                                                   "or its .segments.csv).")],
+    start: Annotated[float | None, typer.Option("--from", help="Open from this capture time, s.")] = None,
+    end: Annotated[float | None, typer.Option("--to", help="Open up to this capture time, s.")] = None,
     web: Annotated[bool, typer.Option("--web", help="Serve the web viewer instead of opening the native one.")] = False,
     bind: Annotated[str, typer.Option(help="Address the web viewer listens on.")] = "127.0.0.1",
 ) -> None:
-    """Open a recording in Rerun's viewer (native, or web with --web)."""
-    from viewer.playback import open_viewer
+    """Open a recording in Rerun's viewer (native, or web with --web); --from/--to open a window of it."""
+    import tempfile
 
-    open_viewer(recording, web=web, bind=bind)
+    from viewer.playback import open_viewer, window_recording
+
+    if start is not None and end is not None and end <= start:
+        raise InputError("--to", f"{end} is not after --from {start}")
+    with tempfile.TemporaryDirectory(prefix="topside-view-") as work:
+        open_viewer(window_recording(recording, start, end, Path(work)), web=web, bind=bind)
 
 
 LIVE_SEGMENT_MIN = 10.0
@@ -372,7 +380,7 @@ def demo(
     console.rule("3/3 accuracy against the simulator's truth")
     evaluate(runs=[csv, scene / "truth.csv"], name="demo", markdown=out / "demo-accuracy.md", plots=None)
     if not no_viewer and has_display():
-        view(recording=rrd, web=False, bind="127.0.0.1")
+        view(recording=rrd, start=None, end=None, web=False, bind="127.0.0.1")
     else:
         console.print(f"open the recording with:  .venv/bin/topside view {rrd}   (or --web for a browser)")
 

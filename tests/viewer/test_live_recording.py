@@ -62,3 +62,18 @@ def test_cone_states() -> None:
     assert stale.state == ConeState.NO_DATA and "NO DATA" in cone_markdown(stale)
     assert cone_reading(estimate([np.nan] * 3), "A", 10.1, 10.05).state == ConeState.NO_DATA
     assert cone_reading(None, "A", 10.1, None).state == ConeState.NO_DATA
+
+
+def test_a_window_of_the_segments(live_run: Path, tmp_path: Path) -> None:
+    from viewer.playback import window_recording
+
+    index = pd.read_csv(live_run / "live.segments.csv")
+    start, end = index["start"].iloc[1] + 0.05, index["end"].iloc[1] - 0.05
+    window = window_recording(live_run / "live.rrd", start, end, tmp_path)
+    chunks = chunks_by_entity(window)
+    times, _ = component_rows(chunks["/offsets/dx/A/estimate"], "Scalars:scalars")
+    assert times.size and times.max() <= end + 1e-6
+    assert times.min() <= start  # opened at the keyframe before --from, so the video decodes from the first frame
+    everything = pd.read_csv(live_run / "offsets.csv").query("cone == 'A'").dropna()
+    assert times.size < len(everything)
+    assert "/world/cameras/cam-port" in chunks  # static data comes along
