@@ -72,7 +72,7 @@ class LiveUpdate:
 
 
 def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: mp.Value, origin: mp.Value,
-                  speed: float, refinement: Refinement, realtime: bool) -> None:
+                  speed: float, refinement: Refinement, realtime: bool, loop_until: float | None = None) -> None:
     """Process entry: track one camera until its source ends or stop is set; reconnect lost live sources."""
     rig = load_rig(rig_path)
     entry = next(c for c in rig.cameras if c.name == name)
@@ -91,7 +91,7 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
         freeze = FreezeDetector()
         state = CameraState.STARTING
         try:
-            for frame in camera_frames(rig, entry, pacer):
+            for frame in camera_frames(rig, entry, pacer, loop_until):
                 if stop.is_set():
                     return
                 frozen = freeze.frozen(frame)
@@ -122,7 +122,7 @@ class LiveTracker:
 
     def __init__(self, rig: Rig, speed: float = 1.0, refinement: Refinement = DEFAULT_REFINEMENT,
                  cameras: list[str] | None = None, tuning: FilterTuning | None = None,
-                 reorder_s: float = REORDER_S) -> None:
+                 reorder_s: float = REORDER_S, loop_until: float | None = None) -> None:
         if rig.path is None:
             raise InputError("rig", "has no file (the workers read it)")
         self.rig = rig
@@ -133,6 +133,7 @@ class LiveTracker:
         self.names = [c.name for c in rig.cameras if cameras is None or c.name in cameras]
         if not self.names:
             raise InputError(rig.path, "no cameras to track (expected at least one)", "cameras")
+        self.loop_until = loop_until  # replay files in a loop up to this capture time (soak tests)
         self.reorder_s = reorder_s if self.realtime else float("inf")  # flat out: strict capture-time order
         self.kf = TopsideFilter(rig, tuning or FilterTuning())
         self.health = {n: CameraHealth(n) for n in self.names}
@@ -151,7 +152,7 @@ class LiveTracker:
         for name in self.names:
             p = self._ctx.Process(target=camera_worker, name=f"camera-{name}", daemon=True,
                                   args=(self.rig.path, name, self._queue, self._stop, self._t0, self._origin,
-                                        self.speed, self.refinement, self.realtime))
+                                        self.speed, self.refinement, self.realtime, self.loop_until))
             p.start()
             self._workers.append(p)
         return self

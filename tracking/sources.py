@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import StrEnum
 from fractions import Fraction
 from pathlib import Path
@@ -156,21 +156,35 @@ def stream_frames(url: str, time_offset: float, clock: Callable[[], float] = tim
                         packet=frame.packet, keyframe=frame.keyframe)
 
 
-def file_frames(path: Path, time_offset: float, pacer: Pacer) -> Iterator[Frame]:
-    """A video file replayed at its own frame rate (or faster): each frame waits until it is due."""
-    for frame in frames(path, time_offset, packets=True):
-        pacer.wait(frame.time)
-        yield frame
+def file_frames(path: Path, time_offset: float, pacer: Pacer, loop_until: float | None = None) -> Iterator[Frame]:
+    """A video file replayed at its own frame rate (or faster): each frame waits until it is due.
+
+    loop_until: replay the file again and again, capture times running on, up to this capture time (soak tests).
+    """
+    shift, index = 0.0, 0
+    while True:
+        first = last = None
+        for frame in frames(path, time_offset, packets=True):
+            first = frame if first is None else first
+            t = frame.time + shift
+            if loop_until is not None and t > loop_until:
+                return
+            pacer.wait(t)
+            yield replace(frame, index=index, time=t) if shift else frame
+            last, index = frame, index + 1
+        if loop_until is None or first is None or last is None or last.index == 0:
+            return
+        shift += (last.time - first.time) * (1 + 1 / last.index)  # one frame interval after the clip's end
 
 
-def camera_frames(rig: Rig, entry: CameraEntry, pacer: Pacer) -> Iterator[Frame]:
+def camera_frames(rig: Rig, entry: CameraEntry, pacer: Pacer, loop_until: float | None = None) -> Iterator[Frame]:
     """The frames of one camera of the rig, whatever its source."""
     kind = source_kind(entry.source)
     if kind == SourceKind.DEVICE:
         return device_frames(int(entry.source), entry.time_offset)
     if kind == SourceKind.STREAM:
         return stream_frames(entry.source, entry.time_offset)
-    return file_frames(rig.resolve(entry.source), entry.time_offset, pacer)
+    return file_frames(rig.resolve(entry.source), entry.time_offset, pacer, loop_until)
 
 
 def first_capture_time(rig: Rig, entry: CameraEntry) -> float | None:

@@ -6,7 +6,7 @@ Entity layout (the jacket frame is the world):
     world/cameras/<camera>               camera pose as the markers place it, with its pinhole
     world/cameras/<camera>/image         the frame (the camera's own H.264 packet, or JPEG), with markers/, axes/,
                                          rejected/ below it
-    world/estimated/<camera>/<id>        each marker's frame as that camera estimates it
+    world/estimated/<camera>[/axes]      every marker's frame as that camera estimates it (boxes labelled by id)
     offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, uncertainty/<axis>/<cone> (1σ),
     health/<camera>/..., status
 """
@@ -129,7 +129,6 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
     log_image(rec, f"{base}/image", result.frame, jpeg_quality)
     if not result.tracked:  # recorded only, to keep up: its overlays stay as they were
         return
-    rr.log(f"world/estimated/{name}", rr.Clear(recursive=True), recording=rec)  # no stale marker frames
     markers = result.detections.markers
     rr.log(f"{base}/image/markers", rr.LineStrips2D(
         [np.vstack([m.corners, m.corners[:1]]) for m in markers],
@@ -152,35 +151,68 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
     if T_jacket_camera is not None:
         rr.log(base, rr.Transform3D(translation=T_jacket_camera[:3, 3], mat3x3=T_jacket_camera[:3, :3]),
                recording=rec)
-        for mid, pose in result.poses.items():
-            T = T_jacket_camera @ pose.T_camera_marker
-            path = f"world/estimated/{name}/{mid}"
-            rr.log(path, rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]), rr.TransformAxes3D(AXIS_LENGTH_M),
-                   recording=rec)
-            rr.log(path, rr.Boxes3D(half_sizes=[[rig.marker_size / 2, rig.marker_size / 2, MARKER_THICKNESS_M]],
-                                    colors=CHOICE_COLORS[pose.choice]), recording=rec)
+        log_marker_frames(rec, f"world/estimated/{name}", rig.marker_size,
+                          {mid: T_jacket_camera @ pose.T_camera_marker for mid, pose in result.poses.items()},
+                          [CHOICE_COLORS[pose.choice] for pose in result.poses.values()])
     errs = [p.reprojection_error for p in result.poses.values()]
     rr.log(f"health/{name}/markers", rr.Scalars(len(result.poses)), recording=rec)
     if errs:
         rr.log(f"health/{name}/reprojection_error_px", rr.Scalars(float(np.mean(errs))), recording=rec)
 
 
-def log_estimate(rec: rr.RecordingStream, estimate: ConeEstimate) -> None:
-    """One cone's offset estimate on the three axis plots."""
-    set_capture_time(rec, estimate.time)
-    for axis, value in zip(AXES, estimate.offset, strict=True):
-        if np.isfinite(value):
-            rr.log(f"offsets/{axis}/{estimate.cone}/estimate", rr.Scalars(float(value)), recording=rec)
-    if estimate.covariance is not None:
-        for axis, sd in zip(AXES, np.sqrt(np.diag(estimate.covariance)), strict=True):
-            rr.log(f"uncertainty/{axis}/{estimate.cone}", rr.Scalars(float(sd)), recording=rec)
+def log_marker_frames(rec: rr.RecordingStream, path: str, size: float, T_jacket_marker: dict[int, np.ndarray],
+                      colors: list[tuple[int, int, int]]) -> None:
+    """Markers' frames as one camera estimates them (4, 4 each): boxes labelled by id and their axes, one entity."""
+    Ts = list(T_jacket_marker.values())
+    centres = [T[:3, 3] for T in Ts]
+    rotations = [cv2.Rodrigues(T[:3, :3])[0].reshape(3) for T in Ts]
+    rr.log(path, rr.Boxes3D(centers=centres, half_sizes=[[size / 2, size / 2, MARKER_THICKNESS_M]] * len(Ts),
+                            rotation_axis_angles=[rr.RotationAxisAngle(axis=r / (np.linalg.norm(r) or 1.0),
+                                                                       radians=float(np.linalg.norm(r)))
+                                                  for r in rotations],
+                            colors=colors, labels=[str(i) for i in T_jacket_marker]), recording=rec)
+    rr.log(f"{path}/axes", rr.Arrows3D(origins=[c for c in centres for _ in range(3)],
+                                       vectors=[T[:3, k] * AXIS_LENGTH_M for T in Ts for k in range(3)],
+                                       colors=AXIS_COLORS * len(Ts)), recording=rec)
 
 
-def log_topside_pose(rec: rr.RecordingStream, latest: dict[str, ConeEstimate]) -> None:
-    """T_jacket_topside from the latest cone offsets: their mean translation (rotation is not estimated yet)."""
-    full = [e.offset for e in latest.values() if np.all(np.isfinite(e.offset))]
-    if full:
-        rr.log("world/topside", rr.Transform3D(translation=np.mean(full, axis=0)), recording=rec)
+def time_column(times: np.ndarray) -> rr.TimeColumn:
+    """Capture times as a column: absolute when they look like Unix time, else seconds from start."""
+    times = np.asarray(times, dtype=float)
+    return (rr.TimeColumn(TIMELINE, timestamp=times) if times.size and times[0] > 1e9
+            else rr.TimeColumn(TIMELINE, duration=times))
+
+
+def send_scalars(rec: rr.RecordingStream, path: str, times: np.ndarray, values: np.ndarray) -> None:
+    """One time series, columnar; non-finite values left out."""
+    ok = np.isfinite(values)
+    if ok.any():
+        rr.send_columns(path, indexes=[time_column(times[ok])], columns=rr.Scalars.columns(scalars=values[ok]),
+                        recording=rec)
+
+
+def log_estimates(rec: rr.RecordingStream, estimates: list[ConeEstimate],
+                  true_offsets: np.ndarray | None = None) -> None:
+    """A batch of cone estimates, columnar: offset, 1σ and (given the (N, 3) truth) error per axis and cone."""
+    for cone in sorted({e.cone for e in estimates}):
+        rows = [i for i, e in enumerate(estimates) if e.cone == cone]
+        times = np.array([estimates[i].time for i in rows])
+        offsets = np.array([estimates[i].offset for i in rows])
+        sds = np.array([np.sqrt(np.diag(estimates[i].covariance)) if estimates[i].covariance is not None
+                        else np.full(3, np.nan) for i in rows])
+        for k, axis in enumerate(AXES):
+            send_scalars(rec, f"offsets/{axis}/{cone}/estimate", times, offsets[:, k])
+            send_scalars(rec, f"uncertainty/{axis}/{cone}", times, sds[:, k])
+            if true_offsets is not None:
+                truth = true_offsets[rows]
+                send_scalars(rec, f"errors/{axis}/{cone}", times, offsets[:, k] - truth[:, k])
+
+
+def log_topside_poses(rec: rr.RecordingStream, times: np.ndarray, translations: np.ndarray) -> None:
+    """T_jacket_topside (N, 3) over time: the mean translation of the cones (rotation is not logged yet)."""
+    if len(times):
+        rr.send_columns("world/topside", indexes=[time_column(times)],
+                        columns=rr.Transform3D.columns(translation=translations), recording=rec)
 
 
 def log_frame_ages(rec: rr.RecordingStream, t: float, last_capture: dict[str, float]) -> None:
@@ -189,18 +221,10 @@ def log_frame_ages(rec: rr.RecordingStream, t: float, last_capture: dict[str, fl
         rr.log(f"health/{name}/frame_age_s", rr.Scalars(max(0.0, t - t_last)), recording=rec)
 
 
-def log_error(rec: rr.RecordingStream, estimate: ConeEstimate, true_offset: np.ndarray) -> None:
-    """Estimate minus truth of one cone at the estimate's capture time."""
-    for axis, value in zip(AXES, estimate.offset - true_offset, strict=True):
-        if np.isfinite(value):
-            rr.log(f"errors/{axis}/{estimate.cone}", rr.Scalars(float(value)), recording=rec)
-
-
 def log_truth(rec: rr.RecordingStream, truth: pd.DataFrame, cones: Iterable[str]) -> None:
     """The ground-truth offsets of every cone, columnar, and the ±tolerance bands."""
     times = truth["time"].to_numpy(dtype=float)
-    index = (rr.TimeColumn(TIMELINE, timestamp=times) if times.size and times[0] > 1e9
-             else rr.TimeColumn(TIMELINE, duration=times))
+    index = time_column(times)
     for cone in cones:
         for axis in AXES:
             col = f"cone_{cone}_{axis}"

@@ -22,14 +22,13 @@ from viewer.recording import (
     JPEG_QUALITY,
     StatusBoard,
     log_camera_model,
-    log_error,
-    log_estimate,
+    log_estimates,
     log_frame,
     log_frame_ages,
     log_image,
     log_rig,
     log_series_styles,
-    log_topside_pose,
+    log_topside_poses,
     log_truth,
     log_video_codec,
     set_capture_time,
@@ -42,6 +41,8 @@ from viewer.superintendent import (
     superintendent_blueprint,
 )
 
+FLUSH_S = 0.5  # estimates are sent in columns covering this much capture time (one call per series)
+AGES_PERIOD_S = 0.2  # camera frame ages are logged this often
 BOARD_PERIOD_S = 0.2  # the superintendent's figures refresh this often (capture time)
 BLUEPRINT_MIN_PERIOD_S = 30.0  # a changed camera-per-cone choice re-sends the live layout at most this often
 
@@ -81,6 +82,8 @@ class Recorder:
         self._blueprint_sent = -np.inf
         self._board_logged = -np.inf
         self._last_update: LiveUpdate | None = None
+        self._estimates: list[ConeEstimate] = []  # not yet sent
+        self._ages_logged = -np.inf
         if self._rrd is not None:
             self._rrd.parent.mkdir(parents=True, exist_ok=True)
         self._open(self._segment_path(0) if segment_s else self._rrd)
@@ -116,6 +119,7 @@ class Recorder:
         seg = self._segments[-1]
         if seg[1] is None or t - seg[1] < self._segment_s:
             return
+        self.flush_estimates()
         self._open(self._segment_path(len(self._segments)))
         for results in self._gop.values():  # the frames a decoder needs before the next keyframe
             for r in results:
@@ -157,18 +161,37 @@ class Recorder:
         self.status.markers[result.camera] = self.status.markers.get(result.camera, 0) + len(result.poses)
         self._last_time = max(self._last_time, result.time)
         self._last_capture[result.camera] = result.time
-        log_frame_ages(self.rec, result.time, self._last_capture)
+        if result.time - self._ages_logged >= AGES_PERIOD_S:
+            log_frame_ages(self.rec, result.time, self._last_capture)
+            self._ages_logged = result.time
         for m in result.offsets:
             self._measured[(m.cone, m.camera)] += 1
 
     def on_estimate(self, estimate: ConeEstimate) -> None:
-        """Log one cone estimate, its error against the truth, and the status panel when due."""
-        log_estimate(self.rec, estimate)
-        if self.truth is not None and estimate.cone in self._truth_cones:
-            log_error(self.rec, estimate, truth_at(self.truth, estimate.cone, np.array([estimate.time]))[0])
+        """Take one cone estimate: sent with the others of its FLUSH_S; the status panel when due."""
+        self._estimates.append(estimate)
+        if estimate.time - self._estimates[0].time >= FLUSH_S:
+            self.flush_estimates()
         self.status.latest[estimate.cone] = estimate
-        log_topside_pose(self.rec, self.status.latest)
         self.status.log_if_due(self.rec, estimate.time)
+
+    def flush_estimates(self) -> None:
+        """Send the buffered estimates: offsets, σ, errors against the truth, and the topside's translation."""
+        batch, self._estimates = self._estimates, []
+        if not batch:
+            return
+        truth = None
+        if self.truth is not None:
+            truth = np.full((len(batch), 3), np.nan)
+            for cone in self._truth_cones & {e.cone for e in batch}:
+                rows = [i for i, e in enumerate(batch) if e.cone == cone]
+                truth[rows] = truth_at(self.truth, cone, np.array([batch[i].time for i in rows]))
+        log_estimates(self.rec, batch, truth)
+        full: dict[float, list[np.ndarray]] = {}
+        for e in batch:
+            if np.all(np.isfinite(e.offset)):
+                full.setdefault(e.time, []).append(e.offset)
+        log_topside_poses(self.rec, np.array(list(full)), np.array([np.mean(v, axis=0) for v in full.values()]))
 
     def on_update(self, update: LiveUpdate) -> None:
         """Log a live update: its frames and estimates, then the superintendent's figures and camera table."""
@@ -181,7 +204,8 @@ class Recorder:
             self._log_board(update)
 
     def _log_board(self, update: LiveUpdate) -> None:
-        """Every cone's reading and the camera table at the update's live time."""
+        """Every cone's reading and the camera table at the update's live time; the estimates so far."""
+        self.flush_estimates()
         self._board_logged = update.now
         for cone in self.cones:
             reading = cone_reading(self.status.latest.get(cone), cone, update.now, update.last_measurement,
@@ -210,6 +234,7 @@ class Recorder:
 
     def close(self) -> None:
         """Final status and flush to disk."""
+        self.flush_estimates()
         self.status.log_if_due(self.rec, self._last_time, force=True)
         if self._last_update is not None:
             self._log_board(self._last_update)

@@ -44,13 +44,14 @@ def test_entities_and_row_counts(recorded: tuple[Path, pd.DataFrame]) -> None:
         assert len(pinhole) == 1  # static
         _, translations = component_rows(chunks[f"/world/cameras/{cam}"], "Transform3D:translation")
         assert len(translations) == FRAMES  # the markers place the camera in every frame
-    for mid in (1, 2, 3, 4):
-        assert any(p.endswith(f"/{mid}") for p in chunks if p.startswith("/world/estimated/"))
+    labels = {lab for cam in ("cam-ahead", "cam-port")
+              for row in component_rows(chunks[f"/world/estimated/{cam}"], "Boxes3D:labels")[1] for lab in row}
+    assert labels == {"1", "2", "3", "4"}
     assert "/status" in chunks and "/world/jacket/cones" in chunks
     assert not any(p.startswith("/uncertainty") for p in chunks)  # the paper's average has no σ
     _, ages = component_rows(chunks["/health/cam-port/frame_age_s"], "Scalars:scalars")
-    assert len(ages) == 2 * FRAMES - 1  # at every frame of either camera once cam-port has started
-    assert max(a[0] for a in ages) == pytest.approx(1 / 30, abs=1e-3)  # cameras interleave every 1/30 s
+    assert len(ages) >= 3  # every 0.2 s of the 0.8 s
+    assert max(a[0] for a in ages) <= 1 / 30 + 1e-3  # cameras interleave every 1/30 s
 
 
 def decoded_count(samples: list) -> int:
@@ -66,8 +67,9 @@ def test_topside_pose_follows_the_offsets(recorded: tuple[Path, pd.DataFrame]) -
     rrd, df = recorded
     _, translations = component_rows(chunks_by_entity(rrd)["/world/topside"], "Transform3D:translation")
     full = df.dropna(subset=["dx", "dy", "dz"])
-    assert len(translations) == len(full)
-    np.testing.assert_allclose(translations[-1][0], full[["dx", "dy", "dz"]].iloc[-1], atol=1e-5)
+    assert len(translations) == full["time"].nunique()  # one pose per capture time with a full offset
+    last = full[full["time"] == full["time"].max()]
+    np.testing.assert_allclose(translations[-1][0], last[["dx", "dy", "dz"]].mean(), atol=1e-5)
 
 
 def test_offsets_equal_csv(recorded: tuple[Path, pd.DataFrame]) -> None:
