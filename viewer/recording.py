@@ -4,9 +4,9 @@ Entity layout (the jacket frame is the world):
     world/jacket/markers/<id>            nominal jacket markers (static)
     world/topside                        estimated topside pose; its markers below it
     world/cameras/<camera>               camera pose as the markers place it, with its pinhole
-    world/cameras/<camera>/image         the frame (the camera's own H.264 packet, or JPEG), with markers/, axes/,
-                                         rejected/ below it
-    world/estimated/<camera>[/axes]      every marker's frame as that camera estimates it (boxes labelled by id)
+    world/cameras/<camera>/image         the frame (the camera's own H.264 packet, or JPEG), with markers/
+                                         (outlines, axes, corners) and rejected/ below it
+    world/estimated/<camera>             every marker's frame as that camera estimates it (boxes by id, axes)
     offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, uncertainty/<axis>/<cone> (1σ),
     health/<camera>/..., status
 """
@@ -121,7 +121,7 @@ def camera_pose_from_markers(rig: Rig, result: FrameResult) -> np.ndarray | None
 
 def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: FrameResult,
               show_rejected: bool = False, jpeg_quality: int = JPEG_QUALITY) -> None:
-    """One camera frame: image, corners, reprojected axes, camera pose, estimated marker frames, health."""
+    """One camera frame: image, corners, reprojected axes, camera pose, estimated marker frames."""
     name = result.camera
     set_capture_time(rec, result.time)
     rr.set_time(f"frame_{name}", sequence=result.frame.index, recording=rec)
@@ -130,19 +130,14 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
     if not result.tracked:  # recorded only, to keep up: its overlays stay as they were
         return
     markers = result.detections.markers
-    rr.log(f"{base}/image/markers", rr.LineStrips2D(
-        [np.vstack([m.corners, m.corners[:1]]) for m in markers],
-        labels=[str(m.id) for m in markers],
-        colors=[CHOICE_COLORS[result.poses[m.id].choice] if m.id in result.poses else REJECTED_COLOR
-                for m in markers], radii=1.0), recording=rec)
-    rr.log(f"{base}/image/corners", rr.Points2D(
-        np.vstack([m.corners for m in markers]) if markers else np.zeros((0, 2)), radii=2.0,
-        colors=[AXIS_COLORS[0], AXIS_COLORS[1], AXIS_COLORS[2], (255, 255, 255)] * len(markers)), recording=rec)
-    strips, colors = [], []
-    for pose in result.poses.values():
-        strips += marker_axes_px(pose, camera, rig.marker_size / 2)
-        colors += AXIS_COLORS
-    rr.log(f"{base}/image/axes", rr.LineStrips2D(strips, colors=colors, radii=1.0), recording=rec)
+    outlines = [np.vstack([m.corners, m.corners[:1]]) for m in markers]
+    colors = [CHOICE_COLORS[result.poses[m.id].choice] if m.id in result.poses else REJECTED_COLOR for m in markers]
+    axes = [seg for pose in result.poses.values() for seg in marker_axes_px(pose, camera, rig.marker_size / 2)]
+    rr.log(f"{base}/image/markers",  # one entity: outlines labelled by id, reprojected axes, corners TL TR BR BL
+           rr.LineStrips2D(outlines + axes, labels=[str(m.id) for m in markers] + [""] * len(axes),
+                           colors=colors + AXIS_COLORS * len(result.poses), radii=1.0),
+           rr.Points2D(np.vstack([m.corners for m in markers]) if markers else np.zeros((0, 2)), radii=2.0,
+                       colors=[*AXIS_COLORS, (255, 255, 255)] * len(markers)), recording=rec)
     if show_rejected:
         rr.log(f"{base}/image/rejected", rr.LineStrips2D(
             [np.vstack([c, c[:1]]) for c in result.detections.rejected], colors=REJECTED_COLOR, radii=0.5),
@@ -154,10 +149,15 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
         log_marker_frames(rec, f"world/estimated/{name}", rig.marker_size,
                           {mid: T_jacket_camera @ pose.T_camera_marker for mid, pose in result.poses.items()},
                           [CHOICE_COLORS[pose.choice] for pose in result.poses.values()])
-    errs = [p.reprojection_error for p in result.poses.values()]
-    rr.log(f"health/{name}/markers", rr.Scalars(len(result.poses)), recording=rec)
-    if errs:
-        rr.log(f"health/{name}/reprojection_error_px", rr.Scalars(float(np.mean(errs))), recording=rec)
+
+
+def log_health(rec: rr.RecordingStream, result: FrameResult) -> None:
+    """A camera's markers found and mean reprojection error in one frame."""
+    set_capture_time(rec, result.time)
+    rr.log(f"health/{result.camera}/markers", rr.Scalars(len(result.poses)), recording=rec)
+    if result.poses:
+        rr.log(f"health/{result.camera}/reprojection_error_px",
+               rr.Scalars(float(np.mean([p.reprojection_error for p in result.poses.values()]))), recording=rec)
 
 
 def log_marker_frames(rec: rr.RecordingStream, path: str, size: float, T_jacket_marker: dict[int, np.ndarray],
@@ -170,10 +170,10 @@ def log_marker_frames(rec: rr.RecordingStream, path: str, size: float, T_jacket_
                             rotation_axis_angles=[rr.RotationAxisAngle(axis=r / (np.linalg.norm(r) or 1.0),
                                                                        radians=float(np.linalg.norm(r)))
                                                   for r in rotations],
-                            colors=colors, labels=[str(i) for i in T_jacket_marker]), recording=rec)
-    rr.log(f"{path}/axes", rr.Arrows3D(origins=[c for c in centres for _ in range(3)],
-                                       vectors=[T[:3, k] * AXIS_LENGTH_M for T in Ts for k in range(3)],
-                                       colors=AXIS_COLORS * len(Ts)), recording=rec)
+                            colors=colors, labels=[str(i) for i in T_jacket_marker]),
+           rr.Arrows3D(origins=[c for c in centres for _ in range(3)],
+                       vectors=[T[:3, k] * AXIS_LENGTH_M for T in Ts for k in range(3)],
+                       colors=AXIS_COLORS * len(Ts)), recording=rec)
 
 
 def time_column(times: np.ndarray) -> rr.TimeColumn:

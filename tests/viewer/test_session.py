@@ -38,8 +38,11 @@ def test_entities_and_row_counts(recorded: tuple[Path, pd.DataFrame]) -> None:
         _, keys = component_rows(chunks[f"/world/cameras/{cam}/image"], "VideoStream:is_keyframe")
         assert keys[0][0]
         assert decoded_count(samples) == FRAMES
-        _, strips = component_rows(chunks[f"/world/cameras/{cam}/image/markers"], "LineStrips2D:strips")
-        assert all(len(s) == 2 for s in strips)  # both markers of the pair outlined in every frame
+        _, labels = component_rows(chunks[f"/world/cameras/{cam}/image/markers"], "LineStrips2D:labels")
+        assert len(labels) == FRAMES and all(sorted(x for x in row if x) == ["1", "2"] or
+                                             sorted(x for x in row if x) == ["3", "4"] for row in labels)
+        _, corners = component_rows(chunks[f"/world/cameras/{cam}/image/markers"], "Points2D:positions")
+        assert all(len(c) == 8 for c in corners)  # both markers of the pair, four corners each, in every frame
         _, pinhole = component_rows(chunks[f"/world/cameras/{cam}"], "Pinhole:image_from_camera")
         assert len(pinhole) == 1  # static
         _, translations = component_rows(chunks[f"/world/cameras/{cam}"], "Transform3D:translation")
