@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -95,3 +96,55 @@ def test_raw_frames_are_encoded_to_decodable_h264() -> None:
     decoded = [f for data, _ in packets if data for f in decoder.decode(av.Packet(data))]
     decoded += decoder.decode(None)
     assert len(decoded) == 25 and decoded[0].width == 160
+
+
+@pytest.fixture
+def http_streams(installation: Path, tmp_path: Path):
+    """The installation's videos as MPEG-TS streams on a local HTTP server, and a rig that reads them."""
+    import functools
+    import http.server
+    import threading
+
+    import av
+    import yaml
+
+    for name in ("cam-ahead", "cam-port"):
+        with av.open(str(installation / f"{name}.mp4")) as src, av.open(str(tmp_path / f"{name}.ts"), "w",
+                                                                         format="mpegts") as dst:
+            out = dst.add_stream_from_template(src.streams.video[0])
+            for packet in src.demux(src.streams.video[0]):
+                if packet.dts is not None:
+                    packet.stream = out
+                    dst.mux(packet)
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *args: object) -> None:
+            pass
+
+    handler = functools.partial(Quiet, directory=str(tmp_path))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    rig = yaml.safe_load((installation / "rig.yaml").read_text())
+    for cam in rig["cameras"]:
+        cam["source"] = f"http://127.0.0.1:{server.server_port}/{cam['name']}.ts"
+        cam["calibration"] = str(installation / cam["calibration"])
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(rig))
+    yield tmp_path / "rig.yaml"
+    server.shutdown()
+
+
+def test_a_stream_that_ends_is_lost_then_taken_back(http_streams: Path) -> None:
+    rig = load_rig(http_streams)
+    assert uses_wall_clock(rig)
+    seen: list[CameraState] = []
+    frames = 0
+    deadline = time.time() + 60
+    with LiveTracker(rig) as tracker:
+        for update in tracker.updates():
+            frames += len(update.results)
+            seen += [e.state for e in update.events if e.camera == "cam-port"]
+            if CameraState.LOST in seen and CameraState.LIVE in seen[seen.index(CameraState.LOST):]:
+                break
+            assert time.time() < deadline, seen
+    lost = seen.index(CameraState.LOST)
+    assert CameraState.LIVE in seen[:lost] and CameraState.LIVE in seen[lost:]  # taken back after the stream ended
+    assert frames >= 2 * FRAMES - 2  # both streams tracked to their ends before the reconnection
