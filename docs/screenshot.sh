@@ -49,6 +49,8 @@ chmod 700 "$TMP"
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$TMP}"
 PORT="$("$PY" -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')"
 
+# The viewer decodes H.264 video streams with an ffmpeg executable on PATH (the project's, if the system has none).
+export PATH="$("$PY" -c 'import os; from viewer.playback import viewer_env; print(viewer_env()["PATH"])')"
 "$RERUN" --headless --renderer vulkan --window-size "$SIZE" --bind 127.0.0.1 --port "$PORT" \
     --hide-welcome-screen >"$TMP/viewer.log" 2>&1 &
 VIEWER=$!

@@ -260,6 +260,8 @@ def live(
                                ] = LIVE_SEGMENT_MIN,
     speed: Annotated[float, typer.Option(help="Replay speed of video files (1: real time; inf: flat out).")] = 1.0,
     duration: Annotated[float | None, typer.Option(help="Stop after this many seconds of capture time.")] = None,
+    layout: Annotated[str, typer.Option(help="Layout stored in the recording: superintendent or analysis.")
+                      ] = "superintendent",
 ) -> None:
     """Track every camera live, fuse them, record, and stream to the superintendent's view."""
     from tracking.live import LiveTracker
@@ -272,11 +274,13 @@ def live(
         raise InputError("--stale/--segment-minutes/--speed", "must be positive")
     if spawn and web:
         raise InputError("--spawn/--web", "choose one viewer")
+    if layout not in ("superintendent", "analysis"):
+        raise InputError("--layout", f"{layout!r} is not a layout (expected superintendent or analysis)")
     the_rig = load_rig(rig)
     viewer_url, viewer_process = start_live_viewer(web, bind) if (spawn or web) else (None, None)
     if web:
         console.print(f"web viewer: http://{bind}:9090/?url={viewer_url}")
-    recorder = Recorder(the_rig, rrd, viewer=viewer_url, segment_s=segment_minutes * 60, stale_s=stale)
+    recorder = Recorder(the_rig, rrd, viewer=viewer_url, segment_s=segment_minutes * 60, stale_s=stale, layout=layout)
     start: list[float] = []
 
     def estimates(tracker: LiveTracker):

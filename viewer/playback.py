@@ -23,6 +23,26 @@ def rerun_binary() -> str:
     return str(local) if local.exists() else (shutil.which("rerun") or "rerun")
 
 
+def viewer_env() -> dict[str, str]:
+    """Environment for Rerun's native viewer: an `ffmpeg` on PATH, which it needs to decode H.264 video streams.
+
+    The one shipped with imageio-ffmpeg is linked as `ffmpeg` into the venv's bin when the system has none.
+    """
+    env = dict(os.environ)
+    if shutil.which("ffmpeg"):
+        return env
+    import imageio_ffmpeg
+
+    shim = Path(sys.executable).parent / "ffmpeg"
+    if not shim.exists():
+        try:
+            shim.symlink_to(imageio_ffmpeg.get_ffmpeg_exe())
+        except OSError:
+            return env
+    env["PATH"] = f"{shim.parent}{os.pathsep}{env.get('PATH', '')}"
+    return env
+
+
 def has_display() -> bool:
     """True when a native window can open."""
     return sys.platform in ("darwin", "win32") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
@@ -44,7 +64,7 @@ def open_viewer(recording: Path, web: bool = False, bind: str = "127.0.0.1") -> 
         raise InputError(recording, "no display for the native viewer (use --web, or open the file on a desktop)")
     if web:
         warn_if_exposed(bind)
-    subprocess.run(viewer_command(recording, web, bind), check=False)
+    subprocess.run(viewer_command(recording, web, bind), check=False, env=viewer_env())
 
 
 GRPC_PORT = 9876
@@ -69,7 +89,7 @@ def start_live_viewer(web: bool, bind: str = "127.0.0.1", grpc_port: int = GRPC_
         warn_if_exposed(bind)
         cmd = [rerun_binary(), "--serve-web", "--bind", bind, "--port", str(grpc_port),
                "--web-viewer-port", str(web_port), "--server-memory-limit", VIEWER_MEMORY_LIMIT]
-    process = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    process = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=viewer_env())
     return f"rerun+http://127.0.0.1:{grpc_port}/proxy", process
 
 

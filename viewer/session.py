@@ -93,12 +93,13 @@ class Recorder:
     def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
                  show_rejected: bool = False, recording_id: str | None = None,
                  jpeg_quality: int = JPEG_QUALITY, viewer: str | None = None, segment_s: float | None = None,
-                 stale_s: float = STALE_S) -> None:
+                 stale_s: float = STALE_S, layout: str = "analysis") -> None:
         self.rig = rig
         self.truth = truth
         self.show_rejected = show_rejected
         self.jpeg_quality = jpeg_quality
         self.stale_s = stale_s
+        self.layout = layout  # the file's stored blueprint: "analysis" (engineers) or "superintendent"
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id, batcher_config=rr.ChunkBatcherConfig(
             flush_tick=BATCH_TICK_S, flush_num_bytes=BATCH_BYTES))
         self.cameras: dict[str, CameraModel] = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
@@ -137,7 +138,9 @@ class Recorder:
         if self._viewer is not None:
             sinks.append(rr.GrpcSink(self._viewer))
         if sinks:
-            self.rec.set_sinks(*sinks, default_blueprint=analysis_blueprint(self.rig, self.truth is not None))
+            blueprint = (superintendent_blueprint(self.rig, self.cone_cameras()) if self.layout == "superintendent"
+                         else analysis_blueprint(self.rig, self.truth is not None))
+            self.rec.set_sinks(*sinks, default_blueprint=blueprint)
         if path is not None:
             self._segments.append([path.name, None, None])
         log_rig(self.rec, self.rig)

@@ -26,9 +26,11 @@ from viewer.recording import TOLERANCE_M, set_capture_time
 ROOT = "superintendent"
 CONFIDENCE_SIGMAS = 2.0  # amber when the offset is inside the tolerance but its 2σ bound is not
 CIRCLE_POINTS = 73
+TARGET_REACH = 1.3  # the bull's-eye shows offsets up to this many tolerances; beyond, the point sits on its rim
 TARGET_COLORS = {"green": (40, 200, 80), "amber": (255, 170, 0), "red": (230, 40, 40), "none": (128, 128, 128)}
-CAMERA_ICONS = {CameraState.STARTING: "⏳", CameraState.LIVE: "🟢", CameraState.FROZEN: "🟡",
-                CameraState.LOST: "🔴", CameraState.ENDED: "⚫"}
+# Words, not emoji: the viewer's font (Inter) has no emoji, and a missing glyph makes the native viewer panic.
+CAMERA_WORDS = {CameraState.STARTING: "starting", CameraState.LIVE: "LIVE", CameraState.FROZEN: "FROZEN",
+                CameraState.LOST: "LOST", CameraState.ENDED: "ended"}
 
 
 class ConeState(StrEnum):
@@ -40,7 +42,8 @@ class ConeState(StrEnum):
     NO_DATA = "none"  # no estimate, or its newest measurement is too old
 
 
-ICONS = {ConeState.GREEN: "🟢", ConeState.AMBER: "🟠", ConeState.RED: "🔴", ConeState.NO_DATA: "⬛"}
+HEADLINES = {ConeState.GREEN: "in tolerance", ConeState.AMBER: "CHECK: at the edge",
+             ConeState.RED: "OUTSIDE tolerance", ConeState.NO_DATA: "NO DATA"}
 
 
 @dataclass(frozen=True)
@@ -79,13 +82,17 @@ def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_meas
 
 def cone_markdown(reading: ConeReading, stale_s: float = STALE_S) -> str:
     """Large figures for one cone."""
-    icon = ICONS[reading.state]
+    headline = f"# Cone {reading.cone}: {HEADLINES[reading.state]}"
     if reading.state == ConeState.NO_DATA:
-        why = ("no measurement yet" if not np.isfinite(reading.age)
-               else f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)")
-        return f"# {icon} Cone {reading.cone}\n# NO DATA\n\n{why}"
+        if not np.isfinite(reading.age):
+            why = "no measurement yet"
+        elif reading.age > stale_s:
+            why = f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)"
+        else:
+            why = "the cameras do not see this cone well enough (1σ above 50 mm)"
+        return f"{headline}\n# NO DATA\n\n{why}"
     dx, dy, dz = reading.offset
-    return (f"# {icon} Cone {reading.cone}\n"
+    return (f"{headline}\n"
             f"# {reading.concentricity * 1000:.0f} mm\n"
             f"## ±{CONFIDENCE_SIGMAS * reading.sigma * 1000:.0f} mm (2σ) of {TOLERANCE_M * 1000:.0f}\n\n"
             f"### Δx {dx * 1000:+.0f} · Δy {dy * 1000:+.0f} · Δz {dz * 1000:+.0f} mm\n\n"
@@ -97,7 +104,7 @@ def cameras_markdown(cameras: Mapping[str, CameraHealth], now: float) -> str:
     lines = ["| camera | state | fps | newest frame | markers | not searched |", "|---|---|---:|---:|---:|---:|"]
     for name, h in sorted(cameras.items()):
         age = "—" if h.last_capture is None else f"{max(0.0, now - h.last_capture):.2f} s"
-        state = f"{CAMERA_ICONS[h.state]} {h.state}" + (f" ({h.detail})" if h.detail and h.detail != "ready" else "")
+        state = CAMERA_WORDS[h.state] + (f" ({h.detail})" if h.detail and h.detail != "ready" else "")
         lines.append(f"| {name} | {state} | {h.fps:.1f} | {age} | {h.markers} | {h.skipped / max(h.frames, 1):.0%} |")
     return "\n".join(lines)
 
@@ -120,7 +127,10 @@ def log_cone_reading(rec: rr.RecordingStream, reading: ConeReading, now: float) 
     if reading.state == ConeState.NO_DATA:
         rr.log(point, rr.Clear(recursive=False), recording=rec)
         return
-    rr.log(point, rr.Points2D([reading.offset[:2] * 1000], radii=max(6.0, 2000 * reading.sigma),
+    xy = reading.offset[:2] * 1000
+    reach = TARGET_REACH * TOLERANCE_M * 1000
+    xy = xy if np.hypot(*xy) <= reach else xy * reach / np.hypot(*xy)  # far off: on the rim, pointing the way
+    rr.log(point, rr.Points2D([xy], radii=max(6.0, 2000 * reading.sigma),
                               colors=TARGET_COLORS[reading.state.value],
                               labels=[f"{reading.concentricity * 1000:.0f} mm"]), recording=rec)
 

@@ -53,6 +53,27 @@ def estimate(offset: list[float], sd: float = 0.005) -> ConeEstimate:
     return ConeEstimate(10.0, "A", np.array(offset), ("cam",), np.eye(3) * sd**2)
 
 
+def viewer_safe(text: str) -> bool:
+    """Only characters the viewer's font has (Latin, Greek, common punctuation): a missing glyph panics it."""
+    return all(ord(c) < 0x250 or 0x370 <= ord(c) < 0x400 or c in "–—·±×…" for c in text)
+
+
+def test_texts_have_only_glyphs_the_viewer_can_draw(live_run: Path) -> None:
+    from tracking.live import CameraHealth
+    from tracking.sources import CameraState
+    from viewer.superintendent import cameras_markdown
+
+    for state in (estimate([0.03, 0.04, 1.0]), estimate([0.12, 0.1, 0.0]), None):
+        assert viewer_safe(cone_markdown(cone_reading(state, "A", 10.1, 10.05)))
+    assert viewer_safe(cameras_markdown({s: CameraHealth(s, s, "detail") for s in CameraState}, 10.0))
+    for name in pd.read_csv(live_run / "live.segments.csv")["file"]:
+        for path, chunks in chunks_by_entity(live_run / name).items():
+            for c in (c for c in ("TextDocument:text", "Boxes3D:labels", "LineStrips2D:labels", "Points2D:labels",
+                                  "SeriesLines:names") if path):
+                for _, rows in [component_rows(chunks, c)]:
+                    assert all(viewer_safe(str(v)) for v in rows), path
+
+
 def test_cone_states() -> None:
     assert cone_reading(estimate([0.03, 0.04, 1.0]), "A", 10.1, 10.05).state == ConeState.GREEN
     assert cone_reading(estimate([0.09, 0.10, 0.0]), "A", 10.1, 10.05).concentricity == pytest.approx(0.1345, abs=1e-4)
