@@ -160,6 +160,19 @@ def log_estimate(rec: rr.RecordingStream, estimate: ConeEstimate) -> None:
             rr.log(f"uncertainty/{axis}/{estimate.cone}", rr.Scalars(float(sd)), recording=rec)
 
 
+def log_estimate_record(rec: rr.RecordingStream, estimate: ConeEstimate) -> None:
+    """The whole estimate (offset, full covariance, cameras) for `topside export`, which rebuilds the archive."""
+    set_capture_time(rec, estimate.time)
+    cov = estimate.covariance.reshape(-1) if estimate.covariance is not None else np.zeros(0)
+    rr.log(f"archive/estimates/{estimate.cone}", rr.AnyValues(offset=estimate.offset, covariance=cov,
+                                                               cameras=" ".join(estimate.cameras)), recording=rec)
+
+
+def log_archive_inputs(rec: rr.RecordingStream, inputs_json: str) -> None:
+    """The rig and calibration files and the tracker's options (JSON), static, for `topside export`."""
+    rr.log("archive/inputs", rr.TextDocument(inputs_json, media_type=rr.MediaType.TEXT), static=True, recording=rec)
+
+
 def log_topside_pose(rec: rr.RecordingStream, latest: dict[str, ConeEstimate]) -> None:
     """T_jacket_topside from the latest cone offsets: their mean translation (rotation is not estimated yet)."""
     full = [e.offset for e in latest.values() if np.all(np.isfinite(e.offset))]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -13,14 +14,17 @@ from tracking.evaluate import truth_at
 from tracking.filtering import ConeEstimate
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
+from viewer.archive import ArchiveInputs
 from viewer.blueprint import analysis_blueprint
 from viewer.recording import (
     APP_ID,
     JPEG_QUALITY,
     StatusBoard,
+    log_archive_inputs,
     log_camera_model,
     log_error,
     log_estimate,
+    log_estimate_record,
     log_frame,
     log_frame_ages,
     log_rig,
@@ -35,7 +39,7 @@ class Recorder:
 
     def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
                  show_rejected: bool = False, recording_id: str | None = None,
-                 jpeg_quality: int = JPEG_QUALITY) -> None:
+                 jpeg_quality: int = JPEG_QUALITY, options: Mapping[str, str] | None = None) -> None:
         self.rig = rig
         self.truth = truth
         self.show_rejected = show_rejected
@@ -52,6 +56,7 @@ class Recorder:
             self.rec.save(rrd, default_blueprint=analysis_blueprint(rig, truth is not None))
         cones = sorted({p.cone for p in rig.all_pairs()} | set(rig.cones))
         log_rig(self.rec, rig)
+        log_archive_inputs(self.rec, ArchiveInputs.from_rig(rig, options or {}).to_json())
         for name, cam in self.cameras.items():
             log_camera_model(self.rec, name, cam)
         log_series_styles(self.rec, cones, truth is not None)
@@ -70,6 +75,7 @@ class Recorder:
     def on_estimate(self, estimate: ConeEstimate) -> None:
         """Log one cone estimate, its error against the truth, and the status panel when due."""
         log_estimate(self.rec, estimate)
+        log_estimate_record(self.rec, estimate)
         if self.truth is not None and estimate.cone in self._truth_cones:
             log_error(self.rec, estimate, truth_at(self.truth, estimate.cone, np.array([estimate.time]))[0])
         self.status.latest[estimate.cone] = estimate

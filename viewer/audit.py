@@ -1,0 +1,456 @@
+"""Checking an MCAP archive (CRCs, indexes, non-empty channels, manifest, signature) and recovering a killed one.
+
+One pass over the file's records in place (mmap): every chunk is decompressed, CRC-checked and its messages
+digested per channel and time block as viewer/manifest.py defines; the summary's indexes and statistics are
+compared with what the pass found; the stored manifest with the recomputed digests.
+"""
+
+from __future__ import annotations
+
+import json
+import mmap
+import struct
+import time
+import zlib
+from dataclasses import dataclass, field
+from io import BytesIO
+from pathlib import Path
+
+import zstandard
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Message,
+    MessageIndex,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+
+from tracking.errors import InputError
+from viewer.manifest import (
+    BLOCK_S,
+    MANIFEST_NAME,
+    NS,
+    SIGNATURE_NAME,
+    Digests,
+    compare,
+    public_key_hex,
+    signature_valid,
+    time_text,
+)
+
+MAGIC = b"\x89MCAP0\r\n"
+RECORD_HEAD = struct.Struct("<BQ")
+FOOTER_BODY = 8 + 8 + 4
+READERS = {Opcode.HEADER: Header, Opcode.FOOTER: Footer, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
+           Opcode.CHUNK: Chunk, Opcode.MESSAGE_INDEX: MessageIndex, Opcode.CHUNK_INDEX: ChunkIndex,
+           Opcode.ATTACHMENT: Attachment, Opcode.ATTACHMENT_INDEX: AttachmentIndex, Opcode.STATISTICS: Statistics,
+           Opcode.METADATA: Metadata, Opcode.METADATA_INDEX: MetadataIndex, Opcode.SUMMARY_OFFSET: SummaryOffset,
+           Opcode.DATA_END: DataEnd}
+
+
+def _parse(opcode: int, body: bytes) -> object:
+    stream = ReadDataStream(BytesIO(body))
+    if opcode == Opcode.MESSAGE:
+        return Message.read(stream, len(body))
+    return READERS[opcode].read(stream)
+
+
+@dataclass
+class ChunkFound:
+    """A chunk as the pass found it."""
+
+    offset: int
+    length: int
+    record: Chunk
+    ok: bool
+    messages: dict[int, list[tuple[int, int]]] = field(default_factory=dict)  # channel -> (log_time, offset)
+    index_offsets: dict[int, int] = field(default_factory=dict)  # channel -> message index record offset
+    index_length: int = 0
+    records: list[object] = field(default_factory=list)  # schemas, channels, messages in order (when ok)
+
+
+@dataclass
+class Scan:
+    """Everything one pass over a file found, and what was wrong with it."""
+
+    size: int
+    block_s: float
+    errors: list[str] = field(default_factory=list)
+    header: Header | None = None
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    counts: dict[int, int] = field(default_factory=dict)  # channel id -> messages
+    chunks: list[ChunkFound] = field(default_factory=list)
+    attachments: list[tuple[int, int, Attachment]] = field(default_factory=list)  # offset, length, record
+    metadata: list[tuple[int, int, Metadata]] = field(default_factory=list)
+    summary: list[object] = field(default_factory=list)
+    data_end: int | None = None  # offset of the DataEnd record
+    footer: Footer | None = None
+    truncated_at: int | None = None  # offset of the first incomplete record
+    digests: Digests = field(default_factory=Digests)
+    first_ns: int | None = None
+    last_ns: int | None = None
+
+    def topic(self, channel_id: int) -> str:
+        """A channel's topic, or its id when its channel record was lost."""
+        ch = self.channels.get(channel_id)
+        return ch.topic if ch else f"channel {channel_id}"
+
+    def attachment(self, name: str) -> Attachment | None:
+        """The last attachment of that name."""
+        found = [a for _, _, a in self.attachments if a.name == name]
+        return found[-1] if found else None
+
+
+def scan(path: Path, block_s: float = BLOCK_S) -> Scan:
+    """One pass over every record of an MCAP file; stops at the first incomplete record."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found")
+    with path.open("rb") as f:
+        size = f.seek(0, 2)
+        if size < len(MAGIC) or not _has_magic(f):
+            raise InputError(path, "not an MCAP file (expected the MCAP magic bytes at the start)")
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            return _scan(mm, size, block_s)
+
+
+def _has_magic(f: object) -> bool:
+    f.seek(0)
+    return f.read(len(MAGIC)) == MAGIC
+
+
+def _scan(mm: mmap.mmap, size: int, block_s: float) -> Scan:
+    s = Scan(size=size, block_s=block_s, digests=Digests(block_s))
+    off = len(MAGIC)
+    in_summary = False
+    while True:
+        if off + RECORD_HEAD.size > size:
+            s.truncated_at = off
+            break
+        opcode, length = RECORD_HEAD.unpack_from(mm, off)
+        body_at = off + RECORD_HEAD.size
+        if body_at + length > size:
+            s.truncated_at = off
+            break
+        body = mm[body_at:body_at + length]
+        try:
+            record = _parse(opcode, body) if opcode in READERS or opcode == Opcode.MESSAGE else None
+        except Exception as exc:  # a damaged record: report and stop, nothing after it can be trusted
+            s.errors.append(f"record at byte {off} (opcode {opcode:#x}) cannot be parsed ({exc})")
+            s.truncated_at = off
+            break
+        if isinstance(record, Header):
+            s.header = record
+            s.digests.header = {"profile": record.profile, "library": record.library}
+        elif in_summary:
+            s.summary.append(record)
+            if isinstance(record, Footer):
+                s.footer = record
+                _check_footer(s, mm, off, record)
+                break
+        elif isinstance(record, Chunk):
+            s.chunks.append(_chunk(s, off, RECORD_HEAD.size + length, record))
+        elif isinstance(record, MessageIndex):
+            _message_index(s, off, RECORD_HEAD.size + length, record)
+        elif isinstance(record, Attachment):
+            if zlib.crc32(body[:-4]) != struct.unpack_from("<I", body, len(body) - 4)[0]:
+                s.errors.append(f"attachment {record.name}: CRC mismatch (content changed)")
+            s.attachments.append((off, RECORD_HEAD.size + length, record))
+            if record.name not in (MANIFEST_NAME, SIGNATURE_NAME):
+                s.digests.add_attachment(record.name, record.media_type, record.log_time, record.create_time,
+                                         record.data)
+        elif isinstance(record, Metadata):
+            s.metadata.append((off, RECORD_HEAD.size + length, record))
+            s.digests.add_metadata(record.name, record.metadata)
+        elif isinstance(record, (Schema, Channel, Message)):
+            _inner(s, record)
+        elif isinstance(record, DataEnd):
+            s.data_end = off
+            if record.data_section_crc and zlib.crc32(mm[:off]) != record.data_section_crc:
+                s.errors.append("data section CRC mismatch: a byte before the summary changed")
+            in_summary = True
+        elif isinstance(record, Footer):  # a footer without a summary
+            s.footer = record
+            _check_footer(s, mm, off, record)
+            break
+        off = body_at + length
+    return s
+
+
+def _check_footer(s: Scan, mm: mmap.mmap, off: int, footer: Footer) -> None:
+    end = off + RECORD_HEAD.size + FOOTER_BODY
+    if mm[end:end + len(MAGIC)] != MAGIC:
+        s.errors.append("no MCAP magic after the footer")
+    if footer.summary_crc and footer.summary_start:
+        crc = zlib.crc32(mm[footer.summary_start:off + RECORD_HEAD.size + 16])
+        if crc != footer.summary_crc:
+            s.errors.append("summary CRC mismatch: the summary section (indexes, statistics) changed")
+
+
+def _inner(s: Scan, record: object, chunk: ChunkFound | None = None, offset: int = 0) -> None:
+    if isinstance(record, Schema):
+        s.schemas[record.id] = record
+        s.digests.add_schema(record.name, record.encoding, record.data)
+    elif isinstance(record, Channel):
+        s.channels[record.id] = record
+        schema = s.schemas.get(record.schema_id)
+        s.digests.add_channel(record.topic, schema.name if schema else "", record.message_encoding, record.metadata)
+        s.counts.setdefault(record.id, 0)
+    elif isinstance(record, Message):
+        s.counts[record.channel_id] = s.counts.get(record.channel_id, 0) + 1
+        s.digests.add_message(s.topic(record.channel_id), record.log_time, record.publish_time, record.sequence,
+                              record.data)
+        s.first_ns = record.log_time if s.first_ns is None else min(s.first_ns, record.log_time)
+        s.last_ns = record.log_time if s.last_ns is None else max(s.last_ns, record.log_time)
+        if chunk is not None:
+            chunk.messages.setdefault(record.channel_id, []).append((record.log_time, offset))
+
+
+def _chunk(s: Scan, off: int, length: int, chunk: Chunk) -> ChunkFound:
+    found = ChunkFound(off, length, chunk, ok=False)
+    where = f"chunk at byte {off} ({time_text(chunk.message_start_time)} .. {time_text(chunk.message_end_time)})"
+    try:
+        if chunk.compression == "zstd":
+            data = zstandard.decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+        elif chunk.compression == "":
+            data = chunk.data
+        else:
+            s.errors.append(f"{where}: compression {chunk.compression!r} not supported by verify (expected zstd)")
+            return found
+    except zstandard.ZstdError as exc:
+        s.errors.append(f"{where}: cannot be decompressed ({exc}); its messages are lost")
+        return found
+    crc_ok = not chunk.uncompressed_crc or zlib.crc32(data) == chunk.uncompressed_crc
+    if not crc_ok:
+        s.errors.append(f"{where}: CRC mismatch (content changed)")
+    pos = 0
+    try:
+        while pos < len(data):
+            opcode, length = RECORD_HEAD.unpack_from(data, pos)
+            body = data[pos + RECORD_HEAD.size:pos + RECORD_HEAD.size + length]
+            if opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
+                record = _parse(opcode, body)
+                _inner(s, record, found, pos)
+                found.records.append(record)
+            pos += RECORD_HEAD.size + length
+    except Exception as exc:
+        s.errors.append(f"{where}: records cannot be parsed ({exc})")
+        return found
+    found.ok = crc_ok
+    return found
+
+
+def _message_index(s: Scan, off: int, length: int, index: MessageIndex) -> None:
+    if not s.chunks:
+        s.errors.append(f"message index at byte {off} before any chunk")
+        return
+    chunk = s.chunks[-1]
+    chunk.index_offsets[index.channel_id] = off
+    chunk.index_length = off + length - (chunk.offset + chunk.length)
+    if chunk.ok and sorted(index.records) != sorted(chunk.messages.get(index.channel_id, [])):
+        s.errors.append(f"message index of {s.topic(index.channel_id)} after the chunk at byte {chunk.offset} "
+                        "disagrees with the chunk's messages")
+
+
+@dataclass
+class Report:
+    """The outcome of `topside verify`: errors make it fail; notes only inform."""
+
+    path: Path
+    errors: list[str]
+    notes: list[str]
+    signature: str  # "valid", "invalid", "absent", "unchecked" (signed, no key given)
+    messages: int
+    channels: int
+    seconds: float
+    size: int
+
+    @property
+    def ok(self) -> bool:
+        """True when nothing is wrong."""
+        return not self.errors
+
+    @property
+    def mb_per_s(self) -> float:
+        """Verify speed."""
+        return self.size / 1e6 / self.seconds if self.seconds > 0 else float("inf")
+
+
+def _check_summary(s: Scan) -> list[str]:
+    """The summary's indexes and statistics against what the pass found."""
+    errors = []
+    indexes = [r for r in s.summary if isinstance(r, ChunkIndex)]
+    ok_chunks = {c.offset: c for c in s.chunks}
+    if len(indexes) != len(s.chunks):
+        errors.append(f"chunk index lists {len(indexes)} chunks, the file holds {len(s.chunks)}")
+    for ix in indexes:
+        c = ok_chunks.get(ix.chunk_start_offset)
+        if c is None:
+            errors.append(f"chunk index points to byte {ix.chunk_start_offset}, where no chunk starts")
+            continue
+        if (ix.chunk_length, ix.message_start_time, ix.message_end_time, ix.compression, ix.compressed_size,
+                ix.uncompressed_size) != (c.length, c.record.message_start_time, c.record.message_end_time,
+                                          c.record.compression, len(c.record.data), c.record.uncompressed_size):
+            errors.append(f"chunk index of the chunk at byte {c.offset} disagrees with the chunk")
+        if ix.message_index_offsets != c.index_offsets:
+            errors.append(f"chunk index of the chunk at byte {c.offset}: message index offsets disagree")
+        if c.ok:
+            for cid, msgs in c.messages.items():
+                if msgs and (min(t for t, _ in msgs) < ix.message_start_time
+                             or max(t for t, _ in msgs) > ix.message_end_time):
+                    errors.append(f"chunk index of the chunk at byte {c.offset}: {s.topic(cid)} outside its times")
+    att_at = {o: a for o, _, a in s.attachments}
+    for ix in (r for r in s.summary if isinstance(r, AttachmentIndex)):
+        a = att_at.get(ix.offset)
+        if a is None or (a.name, a.media_type, len(a.data), a.log_time) != (ix.name, ix.media_type, ix.data_size,
+                                                                              ix.log_time):
+            errors.append(f"attachment index entry {ix.name} does not match the attachment at byte {ix.offset}")
+    meta_at = {o: m for o, _, m in s.metadata}
+    for ix in (r for r in s.summary if isinstance(r, MetadataIndex)):
+        m = meta_at.get(ix.offset)
+        if m is None or m.name != ix.name:
+            errors.append(f"metadata index entry {ix.name} does not match the record at byte {ix.offset}")
+    stats = [r for r in s.summary if isinstance(r, Statistics)]
+    if not stats:
+        errors.append("summary has no statistics record")
+    else:
+        st = stats[0]
+        found = {"message_count": sum(s.counts.values()), "chunk_count": len(s.chunks),
+                 "attachment_count": len(s.attachments), "metadata_count": len(s.metadata),
+                 "channel_count": len(s.channels), "schema_count": len(s.schemas)}
+        for name, value in found.items():
+            if getattr(st, name) != value:
+                errors.append(f"statistics: {name} is {getattr(st, name)}, the file holds {value}")
+        for cid, n in s.counts.items():
+            if st.channel_message_counts.get(cid, 0) != n:
+                errors.append(f"statistics: {s.topic(cid)} has {st.channel_message_counts.get(cid, 0)} messages, "
+                              f"the file holds {n}")
+        if s.first_ns is not None and (st.message_start_time, st.message_end_time) != (s.first_ns, s.last_ns):
+            errors.append("statistics: message time span disagrees with the messages")
+    return errors
+
+
+def verify(path: Path, key: Ed25519PublicKey | None = None) -> Report:
+    """Check an archive: CRCs, indexes, non-empty channels, the manifest's digests, the signature."""
+    t0 = time.perf_counter()
+    s = scan(path)
+    manifest_att = s.attachment(MANIFEST_NAME)
+    manifest = None
+    if manifest_att is not None:
+        try:
+            manifest = json.loads(manifest_att.data)
+        except ValueError:
+            s.errors.append(f"attachment {MANIFEST_NAME} is not valid JSON")
+    if manifest is not None and int(manifest.get("block_ns", 0)) not in (0, s.digests.block_ns):
+        s = scan(path, int(manifest["block_ns"]) / NS)
+    errors, notes = list(s.errors), []
+    if s.header is None:
+        errors.append("no header record")
+    if s.truncated_at is not None:
+        errors.append(f"file ends inside a record at byte {s.truncated_at} of {s.size}: truncated (the writer did "
+                      "not finish); `topside verify --recover` keeps every complete chunk")
+    elif s.footer is None:
+        errors.append("no footer: the writer did not finish")
+    if s.data_end is None:
+        errors.append("no data-end record: summary and indexes missing")
+    else:
+        errors += _check_summary(s)
+    for cid, ch in s.channels.items():
+        if s.counts.get(cid, 0) == 0:
+            errors.append(f"channel {ch.topic} is empty")
+    if not s.channels:
+        errors.append("the file holds no channels")
+    signature = "absent"
+    if manifest is None:
+        errors.append(f"no manifest ({MANIFEST_NAME} attachment): contents cannot be checked against digests")
+    else:
+        errors += [f"manifest: {m}" for m in compare(manifest, s.digests)]
+        if manifest.get("recovered"):
+            notes.append(f"recovered file: {manifest['recovered'].get('note', '')}")
+        sig = s.attachment(SIGNATURE_NAME)
+        if sig is not None and key is None:
+            signature = "unchecked"
+            notes.append(f"signed by key {manifest.get('public_key', '?')[:16]}..; pass --key PUBLIC.pem to check")
+        elif sig is not None and key is not None:
+            signature = "valid" if signature_valid(key, manifest_att.data, sig.data) else "invalid"
+            if signature == "invalid":
+                errors.append(f"signature is not valid for the key {public_key_hex(key)[:16]}..")
+        elif key is not None:
+            errors.append("--key given but the archive is not signed")
+    return Report(Path(path), errors, notes, signature, sum(s.counts.values()), len(s.channels),
+                  time.perf_counter() - t0, s.size)
+
+
+@dataclass(frozen=True)
+class Recovery:
+    """What `verify --recover` kept and lost."""
+
+    out: Path
+    messages: int
+    chunks: int
+    chunks_damaged: int
+    last_ns: int | None
+    bytes_dropped: int
+    manifest_was_missing: bool
+
+
+def recover(path: Path, out: Path) -> Recovery:
+    """Rewrite every complete, intact chunk, attachment and metadata record of a damaged file into a valid one."""
+    from viewer.archive import ArchiveFile, time_span
+
+    path, out = Path(path), Path(out)
+    if path.resolve() == out.resolve():
+        raise InputError(out, "must differ from the file being recovered", "--out")
+    s = scan(path)
+    manifest_missing = s.attachment(MANIFEST_NAME) is None
+    library = s.header.library if s.header else None
+    f = ArchiveFile(out, library=library, block_s=s.block_s)
+    channel_ids: dict[int, int] = {}
+    kept = damaged = 0
+    for chunk in s.chunks:
+        if not chunk.ok:
+            damaged += 1
+            continue
+        kept += 1
+        for r in chunk.records:
+            if isinstance(r, Channel):
+                schema = s.schemas.get(r.schema_id)
+                sid = f.schema_id(schema.name, schema.encoding, schema.data) if schema else 0
+                channel_ids[r.id] = f.channel_id(r.topic, schema.name if schema else "", sid, r.message_encoding,
+                                                 r.metadata)
+            elif isinstance(r, Message) and r.channel_id in channel_ids:
+                f.write_raw(channel_ids[r.channel_id], s.topic(r.channel_id), r.data, r.log_time, r.publish_time,
+                            r.sequence)
+    for _, _, a in s.attachments:
+        if a.name not in (MANIFEST_NAME, SIGNATURE_NAME):
+            f.attach(a.name, a.media_type, a.data, a.log_time, a.create_time)
+    names = set()
+    for _, _, m in s.metadata:
+        f.metadata(m.name, m.metadata)
+        names.add(m.name)
+    if "time_span" not in names:
+        f.metadata("time_span", {**time_span(f.first_ns, f.last_ns), "recovered": "true"})
+    end = s.truncated_at if s.truncated_at is not None else s.size
+    last_good = max((c.offset + c.length + c.index_length for c in s.chunks if c.ok), default=0)
+    note = (f"rebuilt by `topside verify --recover` from {path.name}: {kept} intact chunks kept, {damaged} damaged "
+            f"dropped, {max(0, end - last_good)} bytes after the last intact chunk dropped; "
+            + ("the writer's manifest was missing (it did not close), so this manifest is the recovery's own: it "
+               "proves the file unchanged since recovery, not since recording" if manifest_missing else
+               "the writer's manifest is kept out: its digests covered the lost data"))
+    f.close(recovered={"from": path.name, "note": note})
+    return Recovery(out, sum(f.digests.blocks[t][k].count for t in f.digests.blocks for k in f.digests.blocks[t]),
+                    kept, damaged, f.last_ns, max(0, s.size - last_good), manifest_missing)
