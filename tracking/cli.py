@@ -282,22 +282,22 @@ def verify(
         r = recover_file(archive, out or archive.with_suffix(".recovered.mcap"))
         console.print(f"recovered {r.messages} messages in {r.chunks} chunks up to "
                       f"{time_text(r.last_ns) if r.last_ns is not None else '-'}; {r.chunks_damaged} damaged chunks "
-                      f"and {r.bytes_dropped} trailing bytes dropped")
+                      f"and {r.bytes_dropped} trailing bytes dropped", soft_wrap=True)
         if r.manifest_was_missing:
             console.print("[yellow]the manifest was missing (the writer did not close); the recovered file carries "
-                          "its own, marked 'recovered'[/yellow]")
+                          "its own, marked 'recovered'[/yellow]", soft_wrap=True)
         console.print(f"wrote {r.out}")
         archive = r.out
     report = verify_file(archive, public)
     for note in report.notes:
-        console.print(f"note: {note}", markup=False)
+        console.print(f"note: {note}", markup=False, soft_wrap=True)
     for err in report.errors:
-        console.print(f"FAIL: {err}", markup=False)
+        console.print(f"FAIL: {err}", markup=False, soft_wrap=True)
     sig = {"valid": "signature valid", "invalid": "signature INVALID", "absent": "not signed",
            "unchecked": "signed (not checked: no --key)"}[report.signature]
     state = "OK" if report.ok else f"{len(report.errors)} problems"
     console.print(f"{archive}: {state}; {report.messages} messages on {report.channels} channels; {sig}; "
-                  f"{report.size / 1e6:.1f} MB checked at {report.mb_per_s:.0f} MB/s", markup=False)
+                  f"{report.size / 1e6:.1f} MB checked at {report.mb_per_s:.0f} MB/s", markup=False, soft_wrap=True)
     if not report.ok:
         raise typer.Exit(1)
 
