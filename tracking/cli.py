@@ -165,6 +165,8 @@ def track(
     key: Annotated[Path | None, typer.Option(help="ed25519 private key (PEM) to sign the archive.")] = None,
     vessel: Annotated[str, typer.Option(help="Crane vessel, for the archive's metadata.")] = "",
     operator: Annotated[str, typer.Option(help="Operator, for the archive's metadata.")] = "",
+    video: Annotated[str, typer.Option(help="Archive frames as jpeg (CompressedImage) or h264 (CompressedVideo).")
+                     ] = "jpeg",
 ) -> None:
     """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording."""
     from rich.table import Table
@@ -186,7 +188,7 @@ def track(
 
         sinks.append(Recorder(the_rig, rrd, truth_df, show_rejected=rejected, options=options))
     if mcap is not None:
-        sinks.append(_archive_sink(the_rig, mcap, options, truth_df, key, out, vessel, operator))
+        sinks.append(_archive_sink(the_rig, mcap, options, truth_df, key, out, vessel, operator, video))
     stats = TrackStats()
     totals = [source_frame_count(the_rig.resolve(c.source)) for c in the_rig.cameras]
     total = sum(t for t in totals if t) or None
@@ -232,13 +234,16 @@ def track(
 
 
 def _archive_sink(rig, path: Path, options: dict[str, str], truth_df, key: Path | None, offsets_csv: Path | None,
-                  vessel: str, operator: str):
+                  vessel: str, operator: str, video: str):
     """The MCAP archive writer for `track --mcap` (and its signing key, read before any work starts)."""
-    from viewer.archive import ArchiveSink
+    from viewer.archive import VIDEO_FORMATS, ArchiveSink
     from viewer.manifest import load_private_key
 
+    if video not in VIDEO_FORMATS:
+        raise InputError("--video", f"{video!r} is not a frame format (expected {' or '.join(VIDEO_FORMATS)})")
     private = load_private_key(key) if key is not None else None
-    return ArchiveSink(rig, path, options, {"vessel": vessel, "operator": operator}, truth_df, private, offsets_csv)
+    return ArchiveSink(rig, path, options, {"vessel": vessel, "operator": operator}, truth_df, private, offsets_csv,
+                       video=video)
 
 
 @app.command()
@@ -249,16 +254,22 @@ def export(
     key: Annotated[Path | None, typer.Option(help="ed25519 private key (PEM) to sign the archive.")] = None,
     vessel: Annotated[str, typer.Option(help="Crane vessel, for the archive's metadata.")] = "",
     operator: Annotated[str, typer.Option(help="Operator, for the archive's metadata.")] = "",
+    video: Annotated[str, typer.Option(help="Archive frames as jpeg (CompressedImage) or h264 (CompressedVideo).")
+                     ] = "jpeg",
 ) -> None:
     """Write the MCAP audit archive of a recording: the same content `track --mcap` writes."""
+    from viewer.archive import VIDEO_FORMATS
     from viewer.export import export_recording
     from viewer.manifest import load_private_key
+
+    if video not in VIDEO_FORMATS:
+        raise InputError("--video", f"{video!r} is not a frame format (expected {' or '.join(VIDEO_FORMATS)})")
 
     private = load_private_key(key) if key is not None else None
     if offsets is not None and not offsets.is_file():
         raise InputError(offsets, "offsets CSV not found", "--offsets")
     n = export_recording(recording, mcap, {"vessel": vessel, "operator": operator}, private,
-                         offsets.read_bytes() if offsets else None)
+                         offsets.read_bytes() if offsets else None, video)
     console.print(f"wrote {mcap}: {n} messages (check it with: topside verify {mcap})")
 
 

@@ -25,9 +25,11 @@ import subprocess
 import time as wallclock
 from collections.abc import Mapping
 from dataclasses import dataclass
+from fractions import Fraction
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
+import av
 import cv2
 import numpy as np
 import pandas as pd
@@ -35,6 +37,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.Color_pb2 import Color
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.CompressedVideo_pb2 import CompressedVideo
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
@@ -79,6 +82,10 @@ OUTLINE_PX = 2.0
 TEXT_PX = 14.0
 NS = 1_000_000_000
 DISTORTION_MODELS = {5: "plumb_bob", 8: "rational_polynomial"}
+VIDEO_FORMATS = ("jpeg", "h264")
+H264_CRF = 23  # x264's default quality
+H264_PRESET = "veryfast"
+KEYFRAME_PERIOD_S = 1.0  # a keyframe (with SPS/PPS) every second: seeking and recovery start there
 
 
 def _topside_schemas() -> dict[str, type[Message]]:
@@ -341,6 +348,38 @@ class FrameView:
     markers: int  # rig markers with a pose
     reprojection_error_px: float  # mean over those markers, NaN when none
 
+    def pixels(self) -> np.ndarray:
+        """The frame as (H, W, 3) BGR, decoded from the JPEG (so both archive paths encode the same pixels)."""
+        return cv2.imdecode(np.frombuffer(self.jpeg, np.uint8), cv2.IMREAD_COLOR)
+
+
+class VideoEncoder:
+    """H.264 (Annex B) for one camera with libx264: no B-frames and no look-ahead, so every frame in gives one
+    access unit out at once; a keyframe with its SPS/PPS every KEYFRAME_PERIOD_S."""
+
+    def __init__(self, width: int, height: int, fps: float = 15.0, crf: int = H264_CRF) -> None:
+        self.ctx = av.CodecContext.create("libx264", "w")
+        self.ctx.width, self.ctx.height = width + width % 2, height + height % 2
+        self.ctx.pix_fmt = "yuv420p"
+        self.ctx.time_base = Fraction(1, 1000)
+        self.ctx.framerate = Fraction(fps).limit_denominator(1000)
+        self.ctx.gop_size = max(1, round(fps * KEYFRAME_PERIOD_S))
+        self.ctx.max_b_frames = 0
+        self.ctx.thread_count = 1  # deterministic, and the tracker owns the cores
+        self.ctx.options = {"preset": H264_PRESET, "tune": "zerolatency", "crf": str(crf)}
+        self.first_ns: int | None = None
+
+    def encode(self, bgr: np.ndarray, ns: int) -> bytes:
+        """One frame's access unit (b"" while the encoder holds it back, which zerolatency never does)."""
+        if self.first_ns is None:
+            self.first_ns = ns
+        h, w = bgr.shape[:2]
+        if (w, h) != (self.ctx.width, self.ctx.height):
+            bgr = cv2.copyMakeBorder(bgr, 0, self.ctx.height - h, 0, self.ctx.width - w, cv2.BORDER_REPLICATE)
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(bgr), format="bgr24")
+        frame.pts = (ns - self.first_ns) // 1_000_000
+        return b"".join(bytes(p) for p in self.ctx.encode(frame))
+
 
 def as_f32(a: np.ndarray) -> np.ndarray:
     """Values rounded to float32 and back: what an .rrd stores, so both archive paths write equal numbers."""
@@ -419,7 +458,12 @@ class Archive:
 
     def __init__(self, path: Path, rig: Rig, inputs: ArchiveInputs, cameras: Mapping[str, CameraModel],
                  info: Mapping[str, str] | None = None, truth: list[tuple[int, str, np.ndarray]] | None = None,
-                 key: Ed25519PrivateKey | None = None, chunk_size: int = CHUNK_SIZE, block_s: float = BLOCK_S) -> None:
+                 key: Ed25519PrivateKey | None = None, chunk_size: int = CHUNK_SIZE, block_s: float = BLOCK_S,
+                 video: str = "jpeg") -> None:
+        if video not in VIDEO_FORMATS:
+            raise ValueError(f"video format {video!r} (expected one of {', '.join(VIDEO_FORMATS)})")
+        self.video = video
+        self._encoders: dict[str, VideoEncoder] = {}
         self.rig = rig
         self.inputs = inputs
         self.cameras = dict(cameras)
@@ -431,7 +475,8 @@ class Archive:
             "configuration_sha256": inputs.config_hash(), "rig_file": inputs.rig_name,
             "cameras": " ".join(c.name for c in rig.cameras),
             "cones": " ".join(sorted({p.cone for p in rig.all_pairs()})),
-            "options": json.dumps(inputs.options, sort_keys=True), "archive_format": "topside-mcap/1"})
+            "options": json.dumps(inputs.options, sort_keys=True), "archive_format": "topside-mcap/1",
+            "frames": "foxglove.CompressedVideo h264" if video == "h264" else "foxglove.CompressedImage jpeg"})
         self.file.attach(inputs.rig_name, "application/yaml", inputs.rig_text)
         for name, data in sorted(inputs.calibrations.items()):
             self.file.attach(name, "application/yaml", data)
@@ -478,8 +523,16 @@ class Archive:
         if name not in self._last_calibration or ns - self._last_calibration[name] >= STATIC_PERIOD_S * NS:
             self._last_calibration[name] = ns
             self.file.write(f"{base}/calibration", calibration_message(name, self.cameras[name], ns), ns)
-        self.file.write(f"{base}/image", CompressedImage(timestamp=stamp(ns), frame_id=name, data=view.jpeg,
-                                                         format="jpeg"), ns)
+        if self.video == "h264":
+            cam = self.cameras[name]
+            encoder = self._encoders.setdefault(name, VideoEncoder(cam.width, cam.height))
+            data = encoder.encode(view.pixels(), ns)
+            if data:
+                self.file.write(f"{base}/image", CompressedVideo(timestamp=stamp(ns), frame_id=name, data=data,
+                                                                 format="h264"), ns)
+        else:
+            self.file.write(f"{base}/image", CompressedImage(timestamp=stamp(ns), frame_id=name, data=view.jpeg,
+                                                             format="jpeg"), ns)
         self.file.write(f"{base}/detections", annotations_message(view, ns), ns)
         if view.T_jacket_camera is not None:
             self.file.write("/frames/cameras", FrameTransforms(transforms=[
@@ -552,7 +605,7 @@ class ArchiveSink:
     def __init__(self, rig: Rig, path: Path, options: Mapping[str, str], info: Mapping[str, str] | None = None,
                  truth: pd.DataFrame | None = None, key: Ed25519PrivateKey | None = None,
                  offsets_csv: Path | None = None, jpeg_quality: int = JPEG_QUALITY,
-                 cameras: Mapping[str, CameraModel] | None = None) -> None:
+                 cameras: Mapping[str, CameraModel] | None = None, video: str = "jpeg") -> None:
         from tracking.camera import load_camera
 
         self.rig = rig
@@ -560,7 +613,8 @@ class ArchiveSink:
         self.jpeg_quality = jpeg_quality
         cams = dict(cameras) if cameras is not None else {
             c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
-        self.archive = Archive(path, rig, ArchiveInputs.from_rig(rig, options), cams, info, truth_rows(truth), key)
+        self.archive = Archive(path, rig, ArchiveInputs.from_rig(rig, options), cams, info, truth_rows(truth), key,
+                               video=video)
         self.frame_seconds = 0.0  # wall time spent per frame in on_frame, summed (for the benchmark)
 
     def on_frame(self, result: FrameResult) -> None:

@@ -140,7 +140,8 @@ def truth(chunks: dict[str, list[rr.chunk.Chunk]]) -> list[tuple[int, str, np.nd
 
 
 def export_recording(rrd: Path, out: Path, info: Mapping[str, str] | None = None,
-                     key: Ed25519PrivateKey | None = None, offsets_csv: bytes | None = None) -> int:
+                     key: Ed25519PrivateKey | None = None, offsets_csv: bytes | None = None, video: str = "jpeg"
+                     ) -> int:
     """Write the archive of a recording; returns the number of messages."""
     rrd = Path(rrd)
     if not rrd.is_file():
@@ -170,7 +171,7 @@ def export_recording(rrd: Path, out: Path, info: Mapping[str, str] | None = None
         events += [(v.ns, 0, i, v) for i, v in enumerate(frame_views(chunks, cam.name))]
     events += [(ns, 1, i, e) for i, (ns, e) in enumerate(estimates(chunks))]
     events.sort(key=lambda e: e[:3])
-    archive = Archive(out, rig, inputs, cameras, info, truth(chunks), key)
+    archive = Archive(out, rig, inputs, cameras, info, truth(chunks), key, video=video)
     for ns, kind, _, item in events:
         if kind == 0:
             archive.frame(item)
