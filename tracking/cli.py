@@ -273,6 +273,9 @@ def export(
     console.print(f"wrote {mcap}: {n} messages (check it with: topside verify {mcap})")
 
 
+MAX_FINDINGS = 50  # printed by `verify`; the rest are counted
+
+
 @app.command()
 def verify(
     archive: Annotated[Path, typer.Argument(help="An MCAP archive written by topside.")],
@@ -302,8 +305,10 @@ def verify(
     report = verify_file(archive, public)
     for note in report.notes:
         console.print(f"note: {note}", markup=False, soft_wrap=True)
-    for err in report.errors:
+    for err in report.errors[:MAX_FINDINGS]:
         console.print(f"FAIL: {err}", markup=False, soft_wrap=True)
+    if len(report.errors) > MAX_FINDINGS:
+        console.print(f"FAIL: ... and {len(report.errors) - MAX_FINDINGS} more", soft_wrap=True)
     sig = {"valid": "signature valid", "invalid": "signature INVALID", "absent": "not signed",
            "unchecked": "signed (not checked: no --key)"}[report.signature]
     state = "OK" if report.ok else f"{len(report.errors)} problems"

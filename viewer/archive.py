@@ -84,7 +84,7 @@ NS = 1_000_000_000
 DISTORTION_MODELS = {5: "plumb_bob", 8: "rational_polynomial"}
 VIDEO_FORMATS = ("jpeg", "h264")
 H264_CRF = 23  # x264's default quality
-H264_PRESET = "veryfast"
+H264_PRESET = "superfast"  # 10 ms per 920x600 frame on one core; veryfast: 14 ms, 15 % smaller
 KEYFRAME_PERIOD_S = 1.0  # a keyframe (with SPS/PPS) every second: seeking and recovery start there
 
 

@@ -12,6 +12,7 @@ import mmap
 import struct
 import time
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
@@ -53,6 +54,7 @@ from viewer.manifest import (
 
 MAGIC = b"\x89MCAP0\r\n"
 RECORD_HEAD = struct.Struct("<BQ")
+MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 FOOTER_BODY = 8 + 8 + 4
 READERS = {Opcode.HEADER: Header, Opcode.FOOTER: Footer, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
            Opcode.CHUNK: Chunk, Opcode.MESSAGE_INDEX: MessageIndex, Opcode.CHUNK_INDEX: ChunkIndex,
@@ -76,10 +78,12 @@ class ChunkFound:
     length: int
     record: Chunk
     ok: bool
-    messages: dict[int, list[tuple[int, int]]] = field(default_factory=dict)  # channel -> (log_time, offset)
+    messages: dict[int, list[tuple[int, int]]] = field(default_factory=dict)  # channel -> (log_time, offset),
+    # kept only until the chunk's message indexes are checked
+    times: dict[int, tuple[int, int]] = field(default_factory=dict)  # channel -> (first, last) log time
     index_offsets: dict[int, int] = field(default_factory=dict)  # channel -> message index record offset
     index_length: int = 0
-    records: list[object] = field(default_factory=list)  # schemas, channels, messages in order (when ok)
+    count: int = 0  # messages
 
 
 @dataclass
@@ -115,8 +119,12 @@ class Scan:
         return found[-1] if found else None
 
 
-def scan(path: Path, block_s: float = BLOCK_S) -> Scan:
-    """One pass over every record of an MCAP file; stops at the first incomplete record."""
+OnRecords = Callable[[list[object]], None]  # the schemas, channels and messages of one intact chunk, in order
+
+
+def scan(path: Path, block_s: float = BLOCK_S, on_records: OnRecords | None = None) -> Scan:
+    """One pass over every record of an MCAP file; stops at the first incomplete record. Nothing but digests and
+    offsets is kept: each intact chunk's records go to on_records, then are dropped."""
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file not found")
@@ -125,7 +133,7 @@ def scan(path: Path, block_s: float = BLOCK_S) -> Scan:
         if size < len(MAGIC) or not _has_magic(f):
             raise InputError(path, "not an MCAP file (expected the MCAP magic bytes at the start)")
         with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
-            return _scan(mm, size, block_s)
+            return _scan(mm, size, block_s, on_records)
 
 
 def _has_magic(f: object) -> bool:
@@ -133,7 +141,7 @@ def _has_magic(f: object) -> bool:
     return f.read(len(MAGIC)) == MAGIC
 
 
-def _scan(mm: mmap.mmap, size: int, block_s: float) -> Scan:
+def _scan(mm: mmap.mmap, size: int, block_s: float, on_records: OnRecords | None) -> Scan:
     s = Scan(size=size, block_s=block_s, digests=Digests(block_s))
     off = len(MAGIC)
     in_summary = False
@@ -163,7 +171,9 @@ def _scan(mm: mmap.mmap, size: int, block_s: float) -> Scan:
                 _check_footer(s, mm, off, record)
                 break
         elif isinstance(record, Chunk):
-            s.chunks.append(_chunk(s, off, RECORD_HEAD.size + length, record))
+            if s.chunks:
+                s.chunks[-1].messages = {}
+            s.chunks.append(_chunk(s, off, RECORD_HEAD.size + length, record, on_records))
         elif isinstance(record, MessageIndex):
             _message_index(s, off, RECORD_HEAD.size + length, record)
         elif isinstance(record, Attachment):
@@ -218,9 +228,12 @@ def _inner(s: Scan, record: object, chunk: ChunkFound | None = None, offset: int
         s.last_ns = record.log_time if s.last_ns is None else max(s.last_ns, record.log_time)
         if chunk is not None:
             chunk.messages.setdefault(record.channel_id, []).append((record.log_time, offset))
+            chunk.count += 1
+            first, last = chunk.times.get(record.channel_id, (record.log_time, record.log_time))
+            chunk.times[record.channel_id] = (min(first, record.log_time), max(last, record.log_time))
 
 
-def _chunk(s: Scan, off: int, length: int, chunk: Chunk) -> ChunkFound:
+def _chunk(s: Scan, off: int, length: int, chunk: Chunk, on_records: OnRecords | None) -> ChunkFound:
     found = ChunkFound(off, length, chunk, ok=False)
     where = f"chunk at byte {off} ({time_text(chunk.message_start_time)} .. {time_text(chunk.message_end_time)})"
     try:
@@ -238,19 +251,32 @@ def _chunk(s: Scan, off: int, length: int, chunk: Chunk) -> ChunkFound:
     if not crc_ok:
         s.errors.append(f"{where}: CRC mismatch (content changed)")
     pos = 0
+    records: list[object] = []
+    view = memoryview(data)
     try:
         while pos < len(data):
             opcode, length = RECORD_HEAD.unpack_from(data, pos)
-            body = data[pos + RECORD_HEAD.size:pos + RECORD_HEAD.size + length]
-            if opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
-                record = _parse(opcode, body)
-                _inner(s, record, found, pos)
-                found.records.append(record)
-            pos += RECORD_HEAD.size + length
+            start, end = pos + RECORD_HEAD.size, pos + RECORD_HEAD.size + length
+            if end > len(data):
+                raise ValueError(f"record at {pos} runs past the chunk's end")
+            if opcode == Opcode.MESSAGE:
+                cid, seq, log_time, publish_time = MESSAGE_HEAD.unpack_from(data, start)
+                record = Message(channel_id=cid, sequence=seq, log_time=log_time, publish_time=publish_time,
+                                 data=view[start + MESSAGE_HEAD.size:end])
+            elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
+                record = _parse(opcode, data[start:end])
+            else:
+                pos = end
+                continue
+            _inner(s, record, found, pos)
+            records.append(record)
+            pos = end
     except Exception as exc:
         s.errors.append(f"{where}: records cannot be parsed ({exc})")
         return found
     found.ok = crc_ok
+    if crc_ok and on_records is not None:
+        on_records(records)
     return found
 
 
@@ -309,9 +335,8 @@ def _check_summary(s: Scan) -> list[str]:
         if ix.message_index_offsets != c.index_offsets:
             errors.append(f"chunk index of the chunk at byte {c.offset}: message index offsets disagree")
         if c.ok:
-            for cid, msgs in c.messages.items():
-                if msgs and (min(t for t, _ in msgs) < ix.message_start_time
-                             or max(t for t, _ in msgs) > ix.message_end_time):
+            for cid, (first, last) in c.times.items():
+                if first < ix.message_start_time or last > ix.message_end_time:
                     errors.append(f"chunk index of the chunk at byte {c.offset}: {s.topic(cid)} outside its times")
     att_at = {o: a for o, _, a in s.attachments}
     for ix in (r for r in s.summary if isinstance(r, AttachmentIndex)):
@@ -408,6 +433,22 @@ class Recovery:
     manifest_was_missing: bool
 
 
+def scan_header(path: Path) -> Header | None:
+    """The header record of an MCAP file, if it has one."""
+    with Path(path).open("rb") as f:
+        head = f.read(len(MAGIC) + RECORD_HEAD.size)
+        if head[:len(MAGIC)] != MAGIC or len(head) < len(MAGIC) + RECORD_HEAD.size:
+            return None
+        opcode, length = RECORD_HEAD.unpack_from(head, len(MAGIC))
+        if opcode != Opcode.HEADER or length > 1 << 20:
+            return None
+        body = f.read(length)
+    try:
+        return _parse(opcode, body)
+    except Exception:
+        return None
+
+
 def recover(path: Path, out: Path) -> Recovery:
     """Rewrite every complete, intact chunk, attachment and metadata record of a damaged file into a valid one."""
     from viewer.archive import ArchiveFile, time_span
@@ -415,26 +456,30 @@ def recover(path: Path, out: Path) -> Recovery:
     path, out = Path(path), Path(out)
     if path.resolve() == out.resolve():
         raise InputError(out, "must differ from the file being recovered", "--out")
-    s = scan(path)
-    manifest_missing = s.attachment(MANIFEST_NAME) is None
-    library = s.header.library if s.header else None
-    f = ArchiveFile(out, library=library, block_s=s.block_s)
+    header = scan_header(path)
+    f = ArchiveFile(out, library=header.library if header else None)
     channel_ids: dict[int, int] = {}
-    kept = damaged = 0
-    for chunk in s.chunks:
-        if not chunk.ok:
-            damaged += 1
-            continue
-        kept += 1
-        for r in chunk.records:
-            if isinstance(r, Channel):
-                schema = s.schemas.get(r.schema_id)
+    schemas: dict[int, Schema] = {}
+
+    def copy(records: list[object]) -> None:
+        for r in records:
+            if isinstance(r, Schema):
+                schemas[r.id] = r
+            elif isinstance(r, Channel):
+                schema = schemas.get(r.schema_id)
                 sid = f.schema_id(schema.name, schema.encoding, schema.data) if schema else 0
                 channel_ids[r.id] = f.channel_id(r.topic, schema.name if schema else "", sid, r.message_encoding,
                                                  r.metadata)
+                topics[r.id] = r.topic
             elif isinstance(r, Message) and r.channel_id in channel_ids:
-                f.write_raw(channel_ids[r.channel_id], s.topic(r.channel_id), r.data, r.log_time, r.publish_time,
-                            r.sequence)
+                f.write_raw(channel_ids[r.channel_id], topics[r.channel_id], bytes(r.data), r.log_time,
+                            r.publish_time, r.sequence)
+
+    topics: dict[int, str] = {}
+    s = scan(path, on_records=copy)
+    manifest_missing = s.attachment(MANIFEST_NAME) is None
+    kept = sum(c.ok for c in s.chunks)
+    damaged = len(s.chunks) - kept
     for _, _, a in s.attachments:
         if a.name not in (MANIFEST_NAME, SIGNATURE_NAME):
             f.attach(a.name, a.media_type, a.data, a.log_time, a.create_time)

@@ -113,7 +113,7 @@ def test_truncated_archive_is_detected_and_recovered(chunked: Path, tmp_path: Pa
     cut.write_bytes(data[:len(data) * 2 // 3])
     report = verify(cut)
     assert any("truncated" in e for e in report.errors) and any("no manifest" in e for e in report.errors)
-    kept = sum(len(m) for c in scan(cut).chunks if c.ok for m in c.messages.values())
+    kept = sum(c.count for c in scan(cut).chunks if c.ok)
     rec = recover(cut, tmp_path / "cut.recovered.mcap")
     assert rec.manifest_was_missing and rec.chunks >= 3 and rec.messages == kept
     again = verify(rec.out)
@@ -136,7 +136,7 @@ def test_writer_killed_with_sigkill_is_recovered(installation: Path, tmp_path: P
     broken = verify(out)
     assert not broken.ok
     found = scan(out)
-    complete = sum(len(m) for c in found.chunks if c.ok for m in c.messages.values())
+    complete = sum(c.count for c in found.chunks if c.ok)
     assert len([c for c in found.chunks if c.ok]) >= 3
     cli = subprocess.run([*TOPSIDE, "verify", str(out), "--recover"], capture_output=True, text=True, timeout=120)
     assert cli.returncode == 0, cli.stdout + cli.stderr
