@@ -54,6 +54,7 @@ from viewer.manifest import (
 
 MAGIC = b"\x89MCAP0\r\n"
 RECORD_HEAD = struct.Struct("<BQ")
+CRC_PIECE = 64 * 1024 * 1024
 MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 FOOTER_BODY = 8 + 8 + 4
 READERS = {Opcode.HEADER: Header, Opcode.FOOTER: Footer, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
@@ -190,7 +191,7 @@ def _scan(mm: mmap.mmap, size: int, block_s: float, on_records: OnRecords | None
             _inner(s, record)
         elif isinstance(record, DataEnd):
             s.data_end = off
-            if record.data_section_crc and zlib.crc32(mm[:off]) != record.data_section_crc:
+            if record.data_section_crc and crc32_range(mm, 0, off) != record.data_section_crc:
                 s.errors.append("data section CRC mismatch: a byte before the summary changed")
             in_summary = True
         elif isinstance(record, Footer):  # a footer without a summary
@@ -201,12 +202,21 @@ def _scan(mm: mmap.mmap, size: int, block_s: float, on_records: OnRecords | None
     return s
 
 
+def crc32_range(mm: mmap.mmap, start: int, end: int) -> int:
+    """CRC-32 of mm[start:end], read in CRC_PIECE slices (no copy of a multi-GB file)."""
+    crc = 0
+    with memoryview(mm) as view:
+        for a in range(start, end, CRC_PIECE):
+            crc = zlib.crc32(view[a:min(end, a + CRC_PIECE)], crc)
+    return crc
+
+
 def _check_footer(s: Scan, mm: mmap.mmap, off: int, footer: Footer) -> None:
     end = off + RECORD_HEAD.size + FOOTER_BODY
     if mm[end:end + len(MAGIC)] != MAGIC:
         s.errors.append("no MCAP magic after the footer")
     if footer.summary_crc and footer.summary_start:
-        crc = zlib.crc32(mm[footer.summary_start:off + RECORD_HEAD.size + 16])
+        crc = crc32_range(mm, footer.summary_start, off + RECORD_HEAD.size + 16)
         if crc != footer.summary_crc:
             s.errors.append("summary CRC mismatch: the summary section (indexes, statistics) changed")
 
