@@ -57,9 +57,12 @@ from tracking.pipeline import FrameResult
 from tracking.rig import Rig
 from viewer.manifest import (
     BLOCK_S,
+    CHECKPOINT_NAME,
     MANIFEST_NAME,
     SIGNATURE_NAME,
+    Chain,
     Digests,
+    checkpoint_payload,
     encode_manifest,
     public_key_hex,
 )
@@ -174,11 +177,16 @@ class _Unbuffered:
 
 
 class ArchiveFile:
-    """An MCAP file written incrementally, with the digests of everything in it, sealed by a manifest at close."""
+    """An MCAP file written incrementally, with the digests of everything in it: a checkpoint of the message chain
+    at every flush, the manifest at close; both signed when a key is given."""
 
     def __init__(self, path: Path, chunk_size: int = CHUNK_SIZE, block_s: float = BLOCK_S,
-                 library: str | None = None) -> None:
+                 library: str | None = None, key: Ed25519PrivateKey | None = None, checkpoints: bool = True) -> None:
         self.path = Path(path)
+        self.key = key
+        self.checkpoints = checkpoints
+        self.chain = Chain()
+        self._checkpointed = 0
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._stream = _Unbuffered(self.path)
         self._writer = Writer(self._stream, chunk_size=chunk_size, compression=CompressionType.ZSTD,
@@ -232,6 +240,7 @@ class ArchiveFile:
         self._writer.add_message(channel_id=channel_id, log_time=log_time, data=data, publish_time=publish_time,
                                  sequence=sequence)
         self.digests.add_message(topic, log_time, publish_time, sequence, data)
+        self.chain.add(topic, log_time, publish_time, sequence, data)
         self.first_ns = log_time if self.first_ns is None else min(self.first_ns, log_time)
         self.last_ns = log_time if self.last_ns is None else max(self.last_ns, log_time)
 
@@ -248,12 +257,21 @@ class ArchiveFile:
         self.digests.add_metadata(name, values)
 
     def flush(self) -> None:
-        """Close the chunk in progress and hand everything to the OS."""
+        """Close the chunk in progress, then a checkpoint of the chain after it; hand everything to the OS."""
         self._writer.flush()
+        if self.checkpoints and self.chain.count > self._checkpointed:
+            sha = self.chain.hexdigest()
+            record = {"messages": str(self.chain.count), "sha256": sha, "last_ns": str(self.last_ns)}
+            if self.key is not None:
+                record["signature"] = self.key.sign(checkpoint_payload(self.chain.count, sha)).hex()
+            self.metadata(CHECKPOINT_NAME, record)
+            self._checkpointed = self.chain.count
 
-    def close(self, key: Ed25519PrivateKey | None = None, **manifest_extra: object) -> dict:
-        """Seal: the manifest (and its signature) as attachments, then summary and indexes. Returns the manifest."""
-        self._writer.flush()
+    def close(self, **manifest_extra: object) -> dict:
+        """Seal: the last checkpoint, the manifest (and its signature) as attachments, then summary and indexes.
+        Returns the manifest."""
+        self.flush()
+        key = self.key
         extra = dict(manifest_extra)
         if key is not None:
             extra["public_key"] = public_key_hex(key.public_key())
@@ -468,7 +486,7 @@ class Archive:
         self.inputs = inputs
         self.cameras = dict(cameras)
         self.key = key
-        self.file = ArchiveFile(path, chunk_size=chunk_size, block_s=block_s)
+        self.file = ArchiveFile(path, chunk_size=chunk_size, block_s=block_s, key=key)
         self.file.metadata("topside", {
             "installation": rig.name, **{k: v for k, v in (info or {}).items() if v},
             "software_version": inputs.software_version, "software_commit": inputs.software_commit,
@@ -585,7 +603,7 @@ class Archive:
             self.file.attach("offsets.csv", "text/csv", offsets_csv, log_time=self.file.last_ns or 0)
         self.file.metadata("time_span", time_span(self.file.first_ns, self.file.last_ns,
                                                   {f"frames_{k}": str(v) for k, v in sorted(self._frames.items())}))
-        return self.file.close(self.key)
+        return self.file.close()
 
 
 def time_span(first_ns: int | None, last_ns: int | None, extra: Mapping[str, str] | None = None) -> dict[str, str]:

@@ -42,10 +42,13 @@ from mcap.records import (
 from tracking.errors import InputError
 from viewer.manifest import (
     BLOCK_S,
+    CHECKPOINT_NAME,
     MANIFEST_NAME,
     NS,
     SIGNATURE_NAME,
+    Chain,
     Digests,
+    checkpoint_payload,
     compare,
     public_key_hex,
     signature_valid,
@@ -108,6 +111,9 @@ class Scan:
     digests: Digests = field(default_factory=Digests)
     first_ns: int | None = None
     last_ns: int | None = None
+    chain: Chain = field(default_factory=Chain)  # over every message in file order
+    chain_at: dict[int, tuple[str, int]] = field(default_factory=dict)  # checkpoint count -> (digest, last log time)
+    targets: set[int] = field(default_factory=set)  # message counts the writer checkpointed
 
     def topic(self, channel_id: int) -> str:
         """A channel's topic, or its id when its channel record was lost."""
@@ -134,7 +140,7 @@ def scan(path: Path, block_s: float = BLOCK_S, on_records: OnRecords | None = No
         if size < len(MAGIC) or not _has_magic(f):
             raise InputError(path, "not an MCAP file (expected the MCAP magic bytes at the start)")
         with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
-            return _scan(mm, size, block_s, on_records)
+            return _scan(mm, size, block_s, on_records, _checkpoint_counts(mm, size))
 
 
 def _has_magic(f: object) -> bool:
@@ -142,8 +148,28 @@ def _has_magic(f: object) -> bool:
     return f.read(len(MAGIC)) == MAGIC
 
 
-def _scan(mm: mmap.mmap, size: int, block_s: float, on_records: OnRecords | None) -> Scan:
-    s = Scan(size=size, block_s=block_s, digests=Digests(block_s))
+def _checkpoint_counts(mm: mmap.mmap, size: int) -> set[int]:
+    """The message counts of the writer's checkpoints: a first walk over the top-level records' heads only."""
+    counts: set[int] = set()
+    off = len(MAGIC)
+    while off + RECORD_HEAD.size <= size:
+        opcode, length = RECORD_HEAD.unpack_from(mm, off)
+        end = off + RECORD_HEAD.size + length
+        if end > size or opcode == Opcode.DATA_END:
+            break
+        if opcode == Opcode.METADATA:
+            try:
+                record = _parse(opcode, mm[off + RECORD_HEAD.size:end])
+                if record.name == CHECKPOINT_NAME:
+                    counts.add(int(record.metadata["messages"]))
+            except Exception:
+                pass  # the main pass reports damaged records
+        off = end
+    return counts
+
+
+def _scan(mm: mmap.mmap, size: int, block_s: float, on_records: OnRecords | None, targets: set[int]) -> Scan:
+    s = Scan(size=size, block_s=block_s, digests=Digests(block_s), targets=targets)
     off = len(MAGIC)
     in_summary = False
     while True:
@@ -232,8 +258,11 @@ def _inner(s: Scan, record: object, chunk: ChunkFound | None = None, offset: int
         s.counts.setdefault(record.id, 0)
     elif isinstance(record, Message):
         s.counts[record.channel_id] = s.counts.get(record.channel_id, 0) + 1
-        s.digests.add_message(s.topic(record.channel_id), record.log_time, record.publish_time, record.sequence,
-                              record.data)
+        topic = s.topic(record.channel_id)
+        s.digests.add_message(topic, record.log_time, record.publish_time, record.sequence, record.data)
+        s.chain.add(topic, record.log_time, record.publish_time, record.sequence, record.data)
+        if s.chain.count in s.targets:
+            s.chain_at[s.chain.count] = (s.chain.hexdigest(), record.log_time)
         s.first_ns = record.log_time if s.first_ns is None else min(s.first_ns, record.log_time)
         s.last_ns = record.log_time if s.last_ns is None else max(s.last_ns, record.log_time)
         if chunk is not None:
@@ -424,10 +453,50 @@ def verify(path: Path, key: Ed25519PublicKey | None = None) -> Report:
             signature = "valid" if signature_valid(key, manifest_att.data, sig.data) else "invalid"
             if signature == "invalid":
                 errors.append(f"signature is not valid for the key {public_key_hex(key)[:16]}..")
-        elif key is not None:
+        elif key is not None and not manifest.get("recovered"):
             errors.append("--key given but the archive is not signed")
+    signature = _check_checkpoints(s, key, manifest, errors, notes, signature)
     return Report(Path(path), errors, notes, signature, sum(s.counts.values()), len(s.channels),
                   time.perf_counter() - t0, s.size)
+
+
+def _check_checkpoints(s: Scan, key: Ed25519PublicKey | None, manifest: dict | None, errors: list[str],
+                       notes: list[str], signature: str) -> str:
+    """The writer's checkpoints against the chain of the file's messages; returns the signature state."""
+    total = s.chain.count
+    checkpoints = [m.metadata for _, _, m in s.metadata if m.name == CHECKPOINT_NAME]
+    matched, last_ns, signed_ok, signed_bad = 0, None, 0, 0
+    for cp in checkpoints:
+        n, sha = int(cp.get("messages", 0)), cp.get("sha256", "")
+        if n > total:
+            errors.append(f"checkpoint after message {n}: the file holds only {total} messages")
+            continue
+        found, t = s.chain_at.get(n, ("", None))
+        if found != sha:
+            errors.append(f"checkpoint after message {n} (up to {time_text(int(cp.get('last_ns', 0) or 0))}): the "
+                          "messages before it are not the ones the writer wrote")
+            continue
+        matched, last_ns = max(matched, n), t
+        if key is not None and "signature" in cp:
+            try:
+                ok = signature_valid(key, checkpoint_payload(n, sha), bytes.fromhex(cp["signature"]))
+            except ValueError:
+                ok = False
+            signed_ok, signed_bad = signed_ok + ok, signed_bad + (not ok)
+    if signed_bad:
+        errors.append(f"{signed_bad} checkpoint signatures are not valid for the key {public_key_hex(key)[:16]}..")
+    if checkpoints and matched:
+        notes.append(f"{len(checkpoints)} writer checkpoints match: messages 1..{matched} up to "
+                     f"{time_text(last_ns)} are as written" + (f"; {total - matched} later messages are covered "
+                                                                f"by no writer digest" if matched < total else ""))
+    if manifest is not None and manifest.get("recovered") and key is not None:
+        if signed_ok and not signed_bad:
+            signature = "valid"
+            notes.append(f"the recovered file's manifest is the recovery's own; {signed_ok} signed writer "
+                         "checkpoints are valid for the key")
+        elif not signed_bad:
+            errors.append("--key given but the recovered file has no signed writer checkpoints")
+    return signature
 
 
 @dataclass(frozen=True)
@@ -467,7 +536,7 @@ def recover(path: Path, out: Path) -> Recovery:
     if path.resolve() == out.resolve():
         raise InputError(out, "must differ from the file being recovered", "--out")
     header = scan_header(path)
-    f = ArchiveFile(out, library=header.library if header else None)
+    f = ArchiveFile(out, library=header.library if header else None, checkpoints=False)
     channel_ids: dict[int, int] = {}
     schemas: dict[int, Schema] = {}
 

@@ -1,8 +1,8 @@
 """A writer for the truncation and SIGKILL tests: synthetic frames and estimates into an archive, in real time.
 
-Run as `python -m tests.viewer.archive_writer RIG OUT SECONDS [--forever]`: SECONDS of capture time at 15 FPS per
-camera (a chunk per second), then close; with --forever it never closes (the test kills it) and prints one line
-per chunk written.
+Run as `python -m tests.viewer.archive_writer RIG OUT SECONDS [--forever] [--key PRIVATE.pem]`: SECONDS of
+capture time at 15 FPS per camera (a chunk per second), then close; with --forever it never closes (the test
+kills it) and prints one line per chunk written.
 """
 
 from __future__ import annotations
@@ -18,16 +18,18 @@ from tracking.camera import load_camera
 from tracking.filtering import ConeEstimate
 from tracking.rig import load_rig
 from viewer.archive import Archive, ArchiveInputs, FrameView
+from viewer.manifest import load_private_key
 
 FPS = 15
 T0_NS = 100 * 10**9
 IMAGE_SIZE = (160, 120)
 
 
-def main(rig_path: Path, out: Path, seconds: float, forever: bool) -> None:
+def main(rig_path: Path, out: Path, seconds: float, forever: bool, key: Path | None) -> None:
     rig = load_rig(rig_path)
     cameras = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
-    archive = Archive(out, rig, ArchiveInputs.from_rig(rig, {"mode": "synthetic"}), cameras)
+    archive = Archive(out, rig, ArchiveInputs.from_rig(rig, {"mode": "synthetic"}), cameras,
+                      key=load_private_key(key) if key else None)
     rng = np.random.default_rng(0)
     k = 0
     while forever or k < seconds * FPS:
@@ -47,4 +49,6 @@ def main(rig_path: Path, out: Path, seconds: float, forever: bool) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), Path(sys.argv[2]), float(sys.argv[3]), "--forever" in sys.argv)
+    key_arg = sys.argv[sys.argv.index("--key") + 1] if "--key" in sys.argv else None
+    main(Path(sys.argv[1]), Path(sys.argv[2]), float(sys.argv[3]), "--forever" in sys.argv,
+         Path(key_arg) if key_arg else None)
