@@ -11,7 +11,8 @@ Channels (Foxglove schemas in protobuf encoding, log time = capture time):
     /offsets/<cone>                  topside.ConeOffset: dx dy dz, 1σ, covariance (3x3, m²), status, cameras
     /truth/<cone>                    topside.ConeOffset: the simulator's truth, when known
     /log                             foxglove.Log: events (start, first frame, markers lost/found, cone state)
-Metadata records `topside` (installation, vessel, operator, software, configuration hash) and `time_span`;
+Metadata records `topside` (installation, vessel, operator, software, configuration hash), `time_span`, and a
+`topside.checkpoint` after every flushed chunk (the running SHA-256 of all messages so far, signed with a key);
 attachments: the rig file, every calibration file, the offsets CSV, the manifest (viewer/manifest.py) and its
 ed25519 signature. Chunks (zstd) are flushed to disk every FLUSH_PERIOD_S of capture time, so a killed writer
 leaves every chunk before the last flush readable (`topside verify --recover`).
