@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from collections import Counter
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import cv2
 import numpy as np
@@ -17,6 +17,12 @@ from tracking.calibration import SUBPIX_WINDOW
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import EXIT_BAD_INPUT, InputError
 from tracking.fusion import ESTIMATORS
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from tracking.rig import Rig
+    from viewer.archive import ArchiveSink
 
 app = typer.Typer(
     name="topside",
@@ -233,8 +239,8 @@ def track(
         console.print(f"wrote {mcap} (check it with: topside verify {mcap})")
 
 
-def _archive_sink(rig, path: Path, options: dict[str, str], truth_df, key: Path | None, offsets_csv: Path | None,
-                  vessel: str, operator: str, video: str):
+def _archive_sink(rig: Rig, path: Path, options: dict[str, str], truth_df: pd.DataFrame | None, key: Path | None,
+                  offsets_csv: Path | None, vessel: str, operator: str, video: str) -> ArchiveSink:
     """The MCAP archive writer for `track --mcap` (and its signing key, read before any work starts)."""
     from viewer.archive import VIDEO_FORMATS, ArchiveSink
     from viewer.manifest import load_private_key
@@ -264,7 +270,6 @@ def export(
 
     if video not in VIDEO_FORMATS:
         raise InputError("--video", f"{video!r} is not a frame format (expected {' or '.join(VIDEO_FORMATS)})")
-
     private = load_private_key(key) if key is not None else None
     if offsets is not None and not offsets.is_file():
         raise InputError(offsets, "offsets CSV not found", "--offsets")
