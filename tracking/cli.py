@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from collections import Counter
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import cv2
 import numpy as np
@@ -17,6 +17,12 @@ from tracking.calibration import SUBPIX_WINDOW
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import EXIT_BAD_INPUT, InputError
 from tracking.fusion import ESTIMATORS
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from tracking.rig import Rig
+    from viewer.archive import ArchiveSink
 
 app = typer.Typer(
     name="topside",
@@ -160,6 +166,13 @@ def track(
     rrd: Annotated[Path | None, typer.Option(help="Also record everything to this Rerun file (.rrd).")] = None,
     truth: Annotated[Path | None, typer.Option(help="Ground-truth log to overlay in the recording.")] = None,
     rejected: Annotated[bool, typer.Option("--rejected", help="Record rejected marker candidates too.")] = False,
+    mcap: Annotated[Path | None, typer.Option(help="Also write an MCAP audit archive (opens in Foxglove, Rerun).")
+                    ] = None,
+    key: Annotated[Path | None, typer.Option(help="ed25519 private key (PEM) to sign the archive.")] = None,
+    vessel: Annotated[str, typer.Option(help="Crane vessel, for the archive's metadata.")] = "",
+    operator: Annotated[str, typer.Option(help="Operator, for the archive's metadata.")] = "",
+    video: Annotated[str, typer.Option(help="Archive frames as jpeg (CompressedImage) or h264 (CompressedVideo).")
+                     ] = "jpeg",
 ) -> None:
     """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording."""
     from rich.table import Table
@@ -174,11 +187,14 @@ def track(
     estimator = ESTIMATORS[mode]
     the_rig = load_rig(rig)
     truth_df = read_truth(truth) if truth else None
-    recorder = None
+    options = {"mode": mode, "refine": refine.value}
+    sinks = []  # the CLI composes tracker and viewer; tracking/ never imports viewer
     if rrd is not None:
-        from viewer.session import Recorder  # the CLI composes tracker and viewer; tracking/ never imports viewer
+        from viewer.session import Recorder
 
-        recorder = Recorder(the_rig, rrd, truth_df, show_rejected=rejected)
+        sinks.append(Recorder(the_rig, rrd, truth_df, show_rejected=rejected, options=options))
+    if mcap is not None:
+        sinks.append(_archive_sink(the_rig, mcap, options, truth_df, key, out, vessel, operator, video))
     stats = TrackStats()
     totals = [source_frame_count(the_rig.resolve(c.source)) for c in the_rig.cameras]
     total = sum(t for t in totals if t) or None
@@ -186,25 +202,25 @@ def track(
         task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras", total=total)
 
         def measurements():
-            for result in track_rig(the_rig, refine, packets=recorder is not None):
+            for result in track_rig(the_rig, refine, packets=bool(sinks)):
                 stats.add(result)
                 progress.advance(task)
-                if recorder is not None:
-                    recorder.on_frame(result)
+                for sink in sinks:
+                    sink.on_frame(result)
                 yield from result.offsets
 
         def recorded(estimates):
             for e in estimates:
-                if recorder is not None:
-                    recorder.on_estimate(e)
+                for sink in sinks:
+                    sink.on_estimate(e)
                 yield e
 
         estimates = estimator(the_rig, measurements())
         try:
             n_rows = write_offsets_csv(out, recorded(estimates))
         finally:
-            if recorder is not None:
-                recorder.close()
+            for sink in sinks:
+                sink.close()
     table = Table(title=f"tracked {rig} ({mode} mode)")
     for col in ("camera", "frames", "markers", "pair offsets", "ambiguous"):
         table.add_column(col, justify="right" if col != "camera" else "left")
@@ -219,6 +235,92 @@ def track(
     console.print(f"wrote {n_rows} rows to {out}")
     if rrd is not None:
         console.print(f"wrote {rrd} (open it with: topside view {rrd})")
+    if mcap is not None:
+        console.print(f"wrote {mcap} (check it with: topside verify {mcap})")
+
+
+def _archive_sink(rig: Rig, path: Path, options: dict[str, str], truth_df: pd.DataFrame | None, key: Path | None,
+                  offsets_csv: Path | None, vessel: str, operator: str, video: str) -> ArchiveSink:
+    """The MCAP archive writer for `track --mcap` (and its signing key, read before any work starts)."""
+    from viewer.archive import VIDEO_FORMATS, ArchiveSink
+    from viewer.manifest import load_private_key
+
+    if video not in VIDEO_FORMATS:
+        raise InputError("--video", f"{video!r} is not a frame format (expected {' or '.join(VIDEO_FORMATS)})")
+    private = load_private_key(key) if key is not None else None
+    return ArchiveSink(rig, path, options, {"vessel": vessel, "operator": operator}, truth_df, private, offsets_csv,
+                       video=video)
+
+
+@app.command()
+def export(
+    recording: Annotated[Path, typer.Argument(help="A recording (.rrd) written by `topside track --rrd`.")],
+    mcap: Annotated[Path, typer.Option(help="MCAP archive to write.")],
+    offsets: Annotated[Path | None, typer.Option(help="Offsets CSV of the same run, to attach.")] = None,
+    key: Annotated[Path | None, typer.Option(help="ed25519 private key (PEM) to sign the archive.")] = None,
+    vessel: Annotated[str, typer.Option(help="Crane vessel, for the archive's metadata.")] = "",
+    operator: Annotated[str, typer.Option(help="Operator, for the archive's metadata.")] = "",
+    video: Annotated[str, typer.Option(help="Archive frames as jpeg (CompressedImage) or h264 (CompressedVideo).")
+                     ] = "jpeg",
+) -> None:
+    """Write the MCAP audit archive of a recording: the same content `track --mcap` writes."""
+    from viewer.archive import VIDEO_FORMATS
+    from viewer.export import export_recording
+    from viewer.manifest import load_private_key
+
+    if video not in VIDEO_FORMATS:
+        raise InputError("--video", f"{video!r} is not a frame format (expected {' or '.join(VIDEO_FORMATS)})")
+    private = load_private_key(key) if key is not None else None
+    if offsets is not None and not offsets.is_file():
+        raise InputError(offsets, "offsets CSV not found", "--offsets")
+    n = export_recording(recording, mcap, {"vessel": vessel, "operator": operator}, private,
+                         offsets.read_bytes() if offsets else None, video)
+    console.print(f"wrote {mcap}: {n} messages (check it with: topside verify {mcap})")
+
+
+MAX_FINDINGS = 50  # printed by `verify`; the rest are counted
+
+
+@app.command()
+def verify(
+    archive: Annotated[Path, typer.Argument(help="An MCAP archive written by topside.")],
+    key: Annotated[Path | None, typer.Option(help="ed25519 public key (PEM) the archive must be signed with.")
+                   ] = None,
+    recover: Annotated[bool, typer.Option("--recover", help="Rebuild a valid file from a damaged or killed "
+                                                            "writer's, then check that.")] = False,
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="Where --recover writes (default: "
+                                                                 "NAME.recovered.mcap).")] = None,
+) -> None:
+    """Check an archive: CRCs, indexes, every channel non-empty, the manifest's SHA-256 digests, the signature."""
+    from viewer.audit import recover as recover_file
+    from viewer.audit import verify as verify_file
+    from viewer.manifest import load_public_key, time_text
+
+    public = load_public_key(key) if key is not None else None
+    if recover:
+        r = recover_file(archive, out or archive.with_suffix(".recovered.mcap"))
+        console.print(f"recovered {r.messages} messages in {r.chunks} chunks up to "
+                      f"{time_text(r.last_ns) if r.last_ns is not None else '-'}; {r.chunks_damaged} damaged chunks "
+                      f"and {r.bytes_dropped} trailing bytes dropped", soft_wrap=True)
+        if r.manifest_was_missing:
+            console.print("[yellow]the manifest was missing (the writer did not close); the recovered file carries "
+                          "its own, marked 'recovered'[/yellow]", soft_wrap=True)
+        console.print(f"wrote {r.out}")
+        archive = r.out
+    report = verify_file(archive, public)
+    for note in report.notes:
+        console.print(f"note: {note}", markup=False, soft_wrap=True)
+    for err in report.errors[:MAX_FINDINGS]:
+        console.print(f"FAIL: {err}", markup=False, soft_wrap=True)
+    if len(report.errors) > MAX_FINDINGS:
+        console.print(f"FAIL: ... and {len(report.errors) - MAX_FINDINGS} more", soft_wrap=True)
+    sig = {"valid": "signature valid", "invalid": "signature INVALID", "absent": "not signed",
+           "unchecked": "signed (not checked: no --key)"}[report.signature]
+    state = "OK" if report.ok else f"{len(report.errors)} problems"
+    console.print(f"{archive}: {state}; {report.messages} messages on {report.channels} channels; {sig}; "
+                  f"{report.size / 1e6:.1f} MB checked at {report.mb_per_s:.0f} MB/s", markup=False, soft_wrap=True)
+    if not report.ok:
+        raise typer.Exit(1)
 
 
 @app.command()

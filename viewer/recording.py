@@ -215,6 +215,25 @@ def log_topside_poses(rec: rr.RecordingStream, times: np.ndarray, translations: 
                         columns=rr.Transform3D.columns(translation=translations), recording=rec)
 
 
+def log_estimate_records(rec: rr.RecordingStream, estimates: list[ConeEstimate]) -> None:
+    """Whole estimates (offset, full covariance, cameras) per cone, columnar, for `topside export`."""
+    for cone in sorted({e.cone for e in estimates}):
+        batch = [e for e in estimates if e.cone == cone]
+        n = len(batch)
+        cov = np.array([e.covariance.reshape(-1) if e.covariance is not None else np.full(9, np.nan) for e in batch])
+        rr.send_columns(f"archive/estimates/{cone}", indexes=[time_column(np.array([e.time for e in batch]))],
+                        columns=[*rr.AnyValues.columns(offset=np.array([e.offset for e in batch]).reshape(-1))
+                                 .partition([3] * n),
+                                 *rr.AnyValues.columns(covariance=cov.reshape(-1)).partition([9] * n),
+                                 *rr.AnyValues.columns(cameras=[" ".join(e.cameras) for e in batch])],
+                        recording=rec)
+
+
+def log_archive_inputs(rec: rr.RecordingStream, inputs_json: str) -> None:
+    """The rig and calibration files and the tracker's options (JSON), static, for `topside export`."""
+    rr.log("archive/inputs", rr.TextDocument(inputs_json, media_type=rr.MediaType.TEXT), static=True, recording=rec)
+
+
 def log_frame_ages(rec: rr.RecordingStream, t: float, last_capture: dict[str, float]) -> None:
     """Age of every camera's newest frame at capture time t, s: a stalled camera's age keeps growing."""
     for name, t_last in last_capture.items():

@@ -6,6 +6,7 @@ import csv
 import os
 import subprocess
 from collections import Counter
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -18,13 +19,16 @@ from tracking.filtering import ConeEstimate
 from tracking.live import STALE_S, LiveUpdate
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
+from viewer.archive import ArchiveInputs
 from viewer.blueprint import analysis_blueprint
 from viewer.playback import rerun_binary
 from viewer.recording import (
     APP_ID,
     JPEG_QUALITY,
     StatusBoard,
+    log_archive_inputs,
     log_camera_model,
+    log_estimate_records,
     log_estimates,
     log_frame,
     log_frame_ages,
@@ -48,7 +52,7 @@ from viewer.superintendent import (
 BATCH_TICK_S = 0.5  # rows are gathered into chunks this long: a chunk's schema costs ~2.5 kB, a frame's rows less
 BATCH_BYTES = 8 << 20
 FLUSH_S = 0.5  # estimates are sent in columns covering this much capture time (one call per series)
-AGES_PERIOD_S = 0.2  # camera health (frame ages, markers, reprojection error) is logged this often
+AGES_PERIOD_S = 0.2  # camera frame ages are logged this often
 BOARD_PERIOD_S = 0.2  # the superintendent's figures refresh this often (capture time)
 BLUEPRINT_MIN_PERIOD_S = 30.0  # a changed camera-per-cone choice re-sends the live layout at most this often
 
@@ -93,12 +97,14 @@ class Recorder:
     def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
                  show_rejected: bool = False, recording_id: str | None = None,
                  jpeg_quality: int = JPEG_QUALITY, viewer: str | None = None, segment_s: float | None = None,
-                 stale_s: float = STALE_S, layout: str = "analysis") -> None:
+                 stale_s: float = STALE_S, layout: str = "analysis",
+                 options: Mapping[str, str] | None = None) -> None:
         self.rig = rig
         self.truth = truth
         self.show_rejected = show_rejected
         self.jpeg_quality = jpeg_quality
         self.stale_s = stale_s
+        self._inputs = ArchiveInputs.from_rig(rig, options or {}).to_json()  # for `topside export`
         self.layout = layout  # the file's stored blueprint: "analysis" (engineers) or "superintendent"
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id, batcher_config=rr.ChunkBatcherConfig(
             flush_tick=BATCH_TICK_S, flush_num_bytes=BATCH_BYTES))
@@ -123,7 +129,6 @@ class Recorder:
         self._last_update: LiveUpdate | None = None
         self._estimates: list[ConeEstimate] = []  # not yet sent
         self._ages_logged = -np.inf
-        self._health_logged: dict[str, float] = {}
         if self._rrd is not None:
             self._rrd.parent.mkdir(parents=True, exist_ok=True)
         self._open(self._segment_path(0) if segment_s else self._rrd)
@@ -144,6 +149,7 @@ class Recorder:
         if path is not None:
             self._segments.append([path.name, None, None])
         log_rig(self.rec, self.rig)
+        log_archive_inputs(self.rec, self._inputs)
         for name, cam in self.cameras.items():
             log_camera_model(self.rec, name, cam)
         for name in self._video:
@@ -209,9 +215,8 @@ class Recorder:
         if result.time - self._ages_logged >= AGES_PERIOD_S:
             log_frame_ages(self.rec, result.time, self._last_capture)
             self._ages_logged = result.time
-        if result.tracked and result.time - self._health_logged.get(result.camera, -np.inf) >= AGES_PERIOD_S:
+        if result.tracked:
             log_health(self.rec, result)
-            self._health_logged[result.camera] = result.time
         for m in result.offsets:
             self._measured[(m.cone, m.camera)] += 1
 
@@ -235,6 +240,7 @@ class Recorder:
                 rows = [i for i, e in enumerate(batch) if e.cone == cone]
                 truth[rows] = truth_at(self.truth, cone, np.array([batch[i].time for i in rows]))
         log_estimates(self.rec, batch, truth)
+        log_estimate_records(self.rec, batch)
         full: dict[float, list[np.ndarray]] = {}
         for e in batch:
             if np.all(np.isfinite(e.offset)):
