@@ -25,8 +25,8 @@ from viewer.session import Recorder
 
 RESULTS = Path(__file__).resolve().parent / "results" / "soak.md"
 CLIP_S = 20.0
-SEGMENT_S = 600.0
-SAMPLE_S = 60.0
+SEGMENT_S = 60.0  # as `topside live` (LIVE_SEGMENT_MIN)
+SAMPLE_S = 10.0
 GROWTH_LIMIT_MB = 50.0
 SIZE_LIMIT_GB = 1.0
 

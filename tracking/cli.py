@@ -343,7 +343,8 @@ def view(
         open_viewer(window_recording(recording, start, end, Path(work)), web=web, bind=bind)
 
 
-LIVE_SEGMENT_MIN = 10.0
+LIVE_SEGMENT_MIN = 1.0  # short: rerun-sdk 0.41's file sink holds memory per file (rerun-io/rerun#12623)
+LIVE_ESTIMATE_PERIOD_S = 1 / 30  # the recording keeps a cone's estimates at up to 30 Hz (the CSV keeps all)
 
 
 @app.command()
@@ -382,7 +383,8 @@ def live(
     viewer_url, viewer_process = start_live_viewer(web, bind) if (spawn or web) else (None, None)
     if web:
         console.print(f"web viewer: http://{bind}:9090/?url={viewer_url}")
-    recorder = Recorder(the_rig, rrd, viewer=viewer_url, segment_s=segment_minutes * 60, stale_s=stale, layout=layout)
+    recorder = Recorder(the_rig, rrd, viewer=viewer_url, segment_s=segment_minutes * 60, stale_s=stale, layout=layout,
+                        estimate_period_s=LIVE_ESTIMATE_PERIOD_S)
     start: list[float] = []
 
     def estimates(tracker: LiveTracker):

@@ -98,12 +98,14 @@ class Recorder:
                  show_rejected: bool = False, recording_id: str | None = None,
                  jpeg_quality: int = JPEG_QUALITY, viewer: str | None = None, segment_s: float | None = None,
                  stale_s: float = STALE_S, layout: str = "analysis",
-                 options: Mapping[str, str] | None = None) -> None:
+                 options: Mapping[str, str] | None = None, estimate_period_s: float = 0.0) -> None:
         self.rig = rig
         self.truth = truth
         self.show_rejected = show_rejected
         self.jpeg_quality = jpeg_quality
         self.stale_s = stale_s
+        self.estimate_period_s = estimate_period_s  # live: a cone's estimates are recorded at most this often
+        self._estimate_logged: dict[str, float] = {}
         self._inputs = ArchiveInputs.from_rig(rig, options or {}).to_json()  # for `topside export`
         self.layout = layout  # the file's stored blueprint: "analysis" (engineers) or "superintendent"
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id, batcher_config=rr.ChunkBatcherConfig(
@@ -222,9 +224,11 @@ class Recorder:
 
     def on_estimate(self, estimate: ConeEstimate) -> None:
         """Take one cone estimate: sent with the others of its FLUSH_S; the status panel when due."""
-        self._estimates.append(estimate)
-        if estimate.time - self._estimates[0].time >= FLUSH_S:
-            self.flush_estimates()
+        if estimate.time - self._estimate_logged.get(estimate.cone, -np.inf) >= self.estimate_period_s:
+            self._estimate_logged[estimate.cone] = estimate.time
+            self._estimates.append(estimate)
+            if estimate.time - self._estimates[0].time >= FLUSH_S:
+                self.flush_estimates()
         self.status.latest[estimate.cone] = estimate
         self.status.log_if_due(self.rec, estimate.time)
 
