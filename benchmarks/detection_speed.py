@@ -15,6 +15,7 @@ Renders are cached in benchmarks/.cache/ (delete it to re-render).
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import statistics
 import sys
@@ -229,8 +230,8 @@ def main() -> None:
     frames = ", ".join(f"{s}: {r[METHODS[0]].frames} frames" for s, r in results.items())
     RESULTS.write_text(
         "# Detection speed and accuracy\n\n"
-        f"Measured by `benchmarks/detection_speed.py` on {platform.machine()} ({len(__import__('os').sched_getaffinity(0))}"
-        f" CPUs visible, shared), {date.today().isoformat()}: {', '.join(SCENARIOS)} at 15 FPS ({frames}), "
+        f"Measured by `benchmarks/detection_speed.py` on {platform.machine()} ({len(os.sched_getaffinity(0))} "
+        f"CPUs visible, shared), {date.today().isoformat()}: {', '.join(SCENARIOS)} at 15 FPS ({frames}), "
         f"single-threaded OpenCV, CPU time per frame (median of {repeats} repeats). Frames are decoded "
         "beforehand (decoding is not timed); '+ poses' adds IPPE poses of the rig's markers.\n\n"
         f"{text}\n")

@@ -4,10 +4,12 @@ A MarkerTracker follows the frames of one camera in order. Around each marker of
 frames it crops a region of interest (the marker's box moved by its last motion, grown by a margin
 for motion and scale), shrinks crops of large markers so their smallest marker is about
 ROI_SIDE_PX long, and runs OpenCV's detector there; the rain pass (grey opening) runs only on crops
-where an expected marker was missed. The whole frame is searched with ArUco3 (sized from the
-smallest marker tracked) every FULL_EVERY frames, soon after a tracked marker is lost, while
-nothing is tracked, and when asked (`search_everywhere`). Corners get the same edge fit as
-MarkerDetector's, on the full-resolution frame, so accuracy is that of the stateless detector:
+where an expected marker was missed; a missing marker's crop grows for FORGET_AFTER frames. The
+whole frame is searched for new markers every FULL_EVERY frames, while nothing is tracked, and
+when asked (`search_everywhere`): with ArUco3 (a shrunk segmentation image) where the smallest
+marker expected is large enough, else as MarkerDetector does. Corners get MarkerDetector's edge
+fit on the full-resolution frame; a marker found in a shrunk image whose edge fit fails is found
+again at full resolution. Ids come from OpenCV's decoding as in MarkerDetector. Speed and accuracy:
 benchmarks/results/detection_speed.md.
 """
 
@@ -29,13 +31,16 @@ from tracking.detection import (
 )
 
 FULL_EVERY = 15  # frames between whole-frame searches while every tracked marker is found (1 s at 15 FPS)
-LOST_EVERY = 3  # frames between whole-frame searches while a tracked marker is missing
 IDLE_EVERY = 1  # frames between whole-frame searches while nothing is tracked
-FORGET_AFTER = 15  # a marker missing this many frames is no longer searched around its last position
+FORGET_AFTER = 15  # a marker missing this many frames is no longer searched around its last position (a
+# missing marker is searched in a crop growing by ROI_LOST_GROWTH per frame, and by every whole-frame search)
 ROI_MARGIN_SIDES = 0.6  # a crop reaches this many marker sides beyond the marker's predicted box ...
 ROI_MARGIN_MIN_PX = 12.0  # ... and at least this far
 ROI_MOTION_FRAMES = 2.0  # ... plus this many frames of the marker's last motion
-ROI_LOST_GROWTH = 0.5  # the margin grows by this fraction per frame the marker has been missing
+ROI_LOST_GROWTH = 0.5  # the margin grows by this fraction per frame the marker has been missing ...
+ROI_LOST_MAX = 3.0  # ... up to this many times its size
+ROI_MAX_MARGIN_SIDES = 3.0  # no margin beyond this many marker sides
+PREDICT_FRAMES = 2  # a missing marker is expected to move on at its last velocity for this many frames at most
 ROI_MERGE_PX = 4  # crops closer than this are searched as one
 ROI_SIDE_PX = 48.0  # crops are shrunk so their smallest marker is about this long (never enlarged)
 ARUCO3_CANONICAL_PX = 16  # ArUco3 minSideLengthCanonicalImg: least marker side in its segmentation image
@@ -68,13 +73,14 @@ class Track:
 
     def predicted(self, frame: int) -> np.ndarray:
         """(4, 2) corners expected at a frame number, moving on at the last velocity."""
-        return self.corners + self.velocity * (frame - self.seen)
+        return self.corners + self.velocity * min(frame - self.seen, PREDICT_FRAMES)
 
     def margin(self, frame: int) -> float:
         """Crop margin around the predicted box at a frame number, px."""
         missing = frame - self.seen - 1
-        base = max(ROI_MARGIN_MIN_PX, ROI_MARGIN_SIDES * self.side) * (1 + ROI_LOST_GROWTH * missing)
-        return base + ROI_MOTION_FRAMES * float(np.linalg.norm(self.velocity)) * (frame - self.seen)
+        base = max(ROI_MARGIN_MIN_PX, ROI_MARGIN_SIDES * self.side) * min(1 + ROI_LOST_GROWTH * missing, ROI_LOST_MAX)
+        motion = ROI_MOTION_FRAMES * float(np.linalg.norm(self.velocity)) * min(frame - self.seen, PREDICT_FRAMES)
+        return min(base + motion, max(ROI_MARGIN_MIN_PX, ROI_MAX_MARGIN_SIDES * self.side))
 
 
 @dataclass
@@ -172,11 +178,9 @@ class MarkerTracker:
     and the whole-frame search uses ArUco3, with other refinements both run at full resolution.
     """
 
-    def __init__(self, detector: MarkerDetector, full_every: int = FULL_EVERY, lost_every: int = LOST_EVERY,
-                 idle_every: int = IDLE_EVERY) -> None:
+    def __init__(self, detector: MarkerDetector, full_every: int = FULL_EVERY, idle_every: int = IDLE_EVERY) -> None:
         self.detector = detector  # dictionary, refinement, camera model and rain filter
         self.full_every = full_every
-        self.lost_every = lost_every
         self.idle_every = idle_every
         self.tracks: dict[int, Track] = {}
         self.frame = -1  # number of the frame being processed
@@ -220,9 +224,7 @@ class MarkerTracker:
     def _full_due(self) -> bool:
         """Whether this frame is searched whole."""
         since = self.frame - self.last_full
-        missing = any(t.seen < self.frame - 1 for t in self.tracks.values())
-        due = (self._force_full or since >= self.full_every or (not self.tracks and since >= self.idle_every)
-               or (missing and since >= self.lost_every))
+        due = self._force_full or since >= self.full_every or (not self.tracks and since >= self.idle_every)
         self._force_full = False
         return due
 
