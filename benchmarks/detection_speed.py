@@ -56,8 +56,8 @@ METHODS = ("OpenCV default", "today (MarkerDetector)", "MarkerTracker")
 class Stats:
     """Timings and accuracy counts of one method on one resolution."""
 
-    cpu_ms: list[float] = field(default_factory=list)  # mean CPU ms per frame, one per repeat
-    pose_ms: list[float] = field(default_factory=list)
+    cpu_ms: list[float] = field(default_factory=list)  # detection, mean CPU ms per frame, one per repeat
+    pose_ms: list[float] = field(default_factory=list)  # poses of the rig's markers, the same way
     frames: int = 0
     truth: int = 0  # true markers in the frames
     found: int = 0
@@ -166,8 +166,8 @@ def run_clip(method: str, rig: Rig, camera: CameraModel, frames: list[np.ndarray
 
 
 def benchmark(size: str, seconds: float, repeats: int) -> dict[str, Stats]:
-    """Every method on every camera of both scenarios at one size."""
-    stats = {m: Stats() for m in METHODS}
+    """Every method on every camera of both scenarios at one size; timings per repeat over all clips."""
+    stats = {m: Stats(cpu_ms=[0.0] * repeats, pose_ms=[0.0] * repeats) for m in METHODS}
     for name in SCENARIOS:
         folder = render(name, size, seconds)
         rig = load_rig(folder / "rig.yaml")
@@ -175,21 +175,19 @@ def benchmark(size: str, seconds: float, repeats: int) -> dict[str, Stats]:
         for entry in rig.cameras:
             camera = load_camera(rig.resolve(entry.calibration))
             frames = [f.gray for f in video_frames(rig.resolve(entry.source))]
-            per_method: dict[str, list[tuple[float, float]]] = {m: [] for m in METHODS}
             for r in range(repeats):
                 for method in METHODS:
                     det_ms, pose_ms, found, full = run_clip(method, rig, camera, frames)
-                    per_method[method].append((det_ms * len(frames), pose_ms * len(frames)))
+                    s = stats[method]
+                    s.cpu_ms[r] += det_ms * len(frames)  # summed here, divided by all frames below
+                    s.pose_ms[r] += pose_ms * len(frames)
                     if r == 0:
-                        score(stats[method], found, truth, entry.name)
-                        stats[method].frames += len(frames)
-                        stats[method].full_searches += full
-            for method in METHODS:
-                stats[method].cpu_ms.append(per_method[method])  # type: ignore[arg-type]
-    for s in stats.values():  # per repeat: total ms over all clips / frames
-        clips = s.cpu_ms
-        s.cpu_ms = [sum(c[r][0] for c in clips) / s.frames for r in range(repeats)]  # type: ignore[index]
-        s.pose_ms = [sum(c[r][1] for c in clips) / s.frames for r in range(repeats)]  # type: ignore[index]
+                        score(s, found, truth, entry.name)
+                        s.frames += len(frames)
+                        s.full_searches += full
+    for s in stats.values():
+        s.cpu_ms = [t / s.frames for t in s.cpu_ms]
+        s.pose_ms = [t / s.frames for t in s.pose_ms]
     return stats
 
 

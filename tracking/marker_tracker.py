@@ -49,6 +49,8 @@ ARUCO3_MAX_SCALE = 0.75  # ... with ArUco3 when that shrinks it at least this mu
 NEW_MARKER_SHRINK = 0.6  # markers not yet tracked may be this much smaller than the smallest tracked one
 CONTOUR_POINTS_PER_SIDE = 2.8  # a square's contour has 4 (upright) to 2.8 (turned 45 deg) points per side length
 ROI_MIN_SIZE = 0.5  # a crop's search skips contours of markers smaller than this fraction of its smallest one
+REFINE_REACH_PX = 10.0  # the edge fit reads pixels up to this far beyond a marker's corners ...
+REFINE_REACH_SIDES = 0.4  # ... or this many sides (quiet zone, coarse search and level samples)
 MIN_ROI_PX = 8  # crops narrower than this (a marker leaving the frame) are not searched
 MIN_MARKER_PX = 16.0  # smallest marker side the whole-frame search looks for
 
@@ -65,11 +67,10 @@ class Track:
     corners: np.ndarray  # (4, 2) distorted pixels, TL TR BR BL, when last seen
     velocity: np.ndarray  # (2,) px per frame of its centre
     seen: int  # frame number when last seen
+    side: float = 0.0  # mean side length, px
 
-    @property
-    def side(self) -> float:
-        """Mean side length, px."""
-        return quad_side(self.corners)
+    def __post_init__(self) -> None:
+        self.side = quad_side(self.corners)
 
     def predicted(self, frame: int) -> np.ndarray:
         """(4, 2) corners expected at a frame number, moving on at the last velocity."""
@@ -98,6 +99,11 @@ class Roi:
         """True when the quad (4, 2) lies inside."""
         return bool(self.x0 <= quad[:, 0].min() and quad[:, 0].max() < self.x1
                     and self.y0 <= quad[:, 1].min() and quad[:, 1].max() < self.y1)
+
+    def contains_box(self, other: Roi, pad: int) -> bool:
+        """True when the other rectangle grown by pad px (clipped at 0) lies inside."""
+        return (self.x0 <= max(other.x0 - pad, 0) and other.x1 + pad <= self.x1
+                and self.y0 <= max(other.y0 - pad, 0) and other.y1 + pad <= self.y1)
 
     def overlaps(self, other: Roi) -> bool:
         """True when the two rectangles touch or nearly do."""
@@ -191,6 +197,7 @@ class MarkerTracker:
         self._params = detector_parameters(detector.refinement)
         self._roi_detector = cv2.aruco.ArucoDetector(detector.dictionary, self._params)
         self._full: dict[tuple[int, int, bool], cv2.aruco.ArucoDetector] = {}
+        self._buffer: np.ndarray | None = None  # reused (H, W) image the edges are fitted on
 
     def search_everywhere(self) -> None:
         """Search the whole of the next frame."""
@@ -207,17 +214,21 @@ class MarkerTracker:
             gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
         self.frame += 1
         found: dict[int, Candidate] = {}
-        rejected: list[np.ndarray] = []
+        rejected: list[np.ndarray] | None = [] if keep_rejected else None
         opened_crops = self._search_rois(gray, set(self.tracks), found, rejected)
         opened_full = self._search_full(gray, found, rejected) if self._full_due() else None
         ids = np.array(sorted(found), dtype=int)
         quads = np.array([found[i].quad for i in ids], dtype=np.float64).reshape(-1, 4, 2)
         if len(ids) and self._edges:
-            opened = self._opened_for_refinement(gray, quads, opened_full, opened_crops)
-            quads, ok = self.detector.refine(gray, opened, quads)
+            image = self._refinement_image(gray, quads, opened_full, opened_crops)
+            if image is not None:
+                quads, ok = self.detector.refine(image, None, quads)
+            else:
+                quads, ok = self.detector.refine(gray, opened_full if opened_full is not None
+                                                 else self.detector.opening(gray), quads)
             for k in np.flatnonzero(~ok & np.array([found[i].coarse for i in ids], dtype=bool)):
                 quads[k] = self._full_resolution(gray, int(ids[k]), quads[k])
-        result = detections(quads, ids, rejected if keep_rejected else [])
+        result = detections(quads, ids, rejected or [])
         self._update(result)
         return result
 
@@ -228,7 +239,7 @@ class MarkerTracker:
         self._force_full = False
         return due
 
-    def _search_full(self, gray: np.ndarray, found: dict[int, Candidate], rejected: list[np.ndarray]
+    def _search_full(self, gray: np.ndarray, found: dict[int, Candidate], rejected: list[np.ndarray] | None
                      ) -> np.ndarray | None:
         """The whole-frame search for markers not tracked yet; returns the rain-filtered frame if it made one.
 
@@ -243,7 +254,8 @@ class MarkerTracker:
         detector, coarse = self._full_detector(min_side, max(gray.shape), aruco3), aruco3
         opened = self.detector.opening(gray) if not self.tracks else None
         quads, ids, rej = self.detector.find(gray, opened, detector)
-        rejected += rej
+        if rejected is not None:
+            rejected += rej
         _add(found, quads, ids, coarse)
         return opened
 
@@ -258,7 +270,7 @@ class MarkerTracker:
         return self._full[key]
 
     def _search_rois(self, gray: np.ndarray, wanted: set[int], found: dict[int, Candidate],
-                     rejected: list[np.ndarray]) -> list[tuple[Roi, np.ndarray]]:
+                     rejected: list[np.ndarray] | None) -> list[tuple[Roi, np.ndarray]]:
         """Search around the wanted tracked markers: plain, then rain-filtered where one is missed.
 
         Returns the rain-filtered crops made.
@@ -266,13 +278,14 @@ class MarkerTracker:
         opened_crops = []
         for roi in self._rois(gray.shape, wanted):
             crop = gray[roi.y0:roi.y1, roi.x0:roi.x1]
-            quads, ids, rej = self._search_crop(crop, roi)
-            rejected += rej
+            quads, ids, rej = self._search_crop(crop, roi, rejected is not None)
+            if rejected is not None:
+                rejected += rej
             _add(found, quads, ids, self._shrink(roi) < 1)
             if roi.ids - set(found) and self.detector.rain_filter > 1:
                 opened = self.detector.opening(crop)
                 opened_crops.append((roi, opened))
-                quads, ids, _ = self._search_crop(opened, roi)
+                quads, ids, _ = self._search_crop(opened, roi, False)
                 _add(found, quads, ids, self._shrink(roi) < 1)
         return opened_crops
 
@@ -280,8 +293,9 @@ class MarkerTracker:
         """Scale a crop is searched at."""
         return min(1.0, ROI_SIDE_PX / max(roi.min_side, 1.0)) if self._edges else 1.0
 
-    def _search_crop(self, crop: np.ndarray, roi: Roi) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
-        """Quads (B, 4, 2) in frame pixels, ids (B,) and rejected candidates (4, 2) in the crop of roi."""
+    def _search_crop(self, crop: np.ndarray, roi: Roi, keep_rejected: bool
+                     ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+        """Quads (B, 4, 2) in frame pixels, ids (B,) and (if kept) rejected candidates (4, 2) in the crop of roi."""
         scale = self._shrink(roi)
         s = np.ones(2)
         if scale < 1.0:
@@ -294,7 +308,7 @@ class MarkerTracker:
         shift = np.array([roi.x0, roi.y0], dtype=np.float64)
         # pixel centres: shrunk pixel i covers source pixels [i / s, (i + 1) / s)
         quads = (quads + 0.5) / s - 0.5 + shift
-        rejected = [(r.reshape(4, 2) + 0.5) / s - 0.5 + shift for r in rejected]
+        rejected = [(r.reshape(4, 2) + 0.5) / s - 0.5 + shift for r in rejected] if keep_rejected else []
         return quads, ids, rejected
 
     def _rois(self, shape: tuple[int, ...], ids: set[int]) -> list[Roi]:
@@ -324,28 +338,44 @@ class MarkerTracker:
             opened_frame[roi.y0:roi.y1, roi.x0:roi.x1] = opened
         return self.detector.refine(gray, opened_frame, q)[0][0]
 
-    def _opened_for_refinement(self, gray: np.ndarray, quads: np.ndarray, opened_full: np.ndarray | None,
-                               opened_crops: list[tuple[Roi, np.ndarray]]) -> np.ndarray | None:
-        """The rain-filtered frame around the markers refined on it (cells wide enough), or None."""
-        if self.detector.rain_filter <= 1:
-            return None
-        if opened_full is not None:
-            return opened_full
+    def _refinement_image(self, gray: np.ndarray, quads: np.ndarray, opened_full: np.ndarray | None,
+                          opened_crops: list[tuple[Roi, np.ndarray]]) -> np.ndarray | None:
+        """One (H, W) image to fit every marker's edges on, valid around the markers, or None to use MarkerDetector's.
+
+        Around markers whose cells survive the rain filter it is the rain-filtered frame, around
+        the others the frame itself, as MarkerDetector.refine chooses; one image means one
+        vectorised edge fit per frame. None when there is nothing to filter or the regions touch.
+        """
         cells = self.detector.dictionary.markerSize + 2
-        big = [q for q in quads if quad_side(q) / cells >= RAIN_REFINE_MIN_CELL_PX]
-        if not big:
+        sides = np.array([quad_side(q) for q in quads])
+        big = sides / cells >= RAIN_REFINE_MIN_CELL_PX
+        if self.detector.rain_filter <= 1 or not big.any():
+            return gray
+        regions = [box_roi(q, max(REFINE_REACH_PX, REFINE_REACH_SIDES * side), gray.shape, set(), side)
+                   for q, side in zip(quads, sides, strict=True)]
+        if any(r is None for r in regions) or any(
+                regions[i].overlaps(regions[j]) for i in np.flatnonzero(big) for j in np.flatnonzero(~big)):
             return None
-        opened = gray.copy()
-        for roi, crop in opened_crops:
-            opened[roi.y0:roi.y1, roi.x0:roi.x1] = crop
-        done = [roi for roi, _ in opened_crops]
-        for q in big:
-            if not any(roi.contains(q) for roi in done):
-                roi = box_roi(q, max(ROI_MARGIN_MIN_PX, ROI_MARGIN_SIDES * quad_side(q)), gray.shape, set(), 0)
-                if roi is not None:
-                    opened[roi.y0:roi.y1, roi.x0:roi.x1] = self.detector.opening(gray[roi.y0:roi.y1, roi.x0:roi.x1])
-                    done.append(roi)
-        return opened
+        if self._buffer is None or self._buffer.shape != gray.shape:
+            self._buffer = np.empty_like(gray)
+        image = self._buffer  # valid only in the regions written below
+        pad = self.detector.rain_filter  # an opening reaches this far: filter a padded crop, keep its inside
+        for r, is_big in zip(regions, big, strict=True):
+            window = (slice(r.y0, r.y1), slice(r.x0, r.x1))
+            if not is_big:
+                image[window] = gray[window]
+            elif opened_full is not None:
+                image[window] = opened_full[window]
+            else:
+                src = next((c for c in opened_crops if c[0].contains_box(r, pad)), None)
+                if src is not None:
+                    roi, crop = src
+                    image[window] = crop[r.y0 - roi.y0:r.y1 - roi.y0, r.x0 - roi.x0:r.x1 - roi.x0]
+                else:
+                    y0, x0 = max(r.y0 - pad, 0), max(r.x0 - pad, 0)
+                    crop = self.detector.opening(gray[y0:r.y1 + pad, x0:r.x1 + pad])
+                    image[window] = crop[r.y0 - y0:r.y1 - y0, r.x0 - x0:r.x1 - x0]
+        return image
 
     def _update(self, result: Detections) -> None:
         """Move the tracks to this frame's markers; forget those missing too long."""
