@@ -67,6 +67,7 @@ class Track:
     corners: np.ndarray  # (4, 2) distorted pixels, TL TR BR BL, when last seen
     velocity: np.ndarray  # (2,) px per frame of its centre
     seen: int  # frame number when last seen
+    rain: bool = False  # last found by the rain-filtered pass
     side: float = 0.0  # mean side length, px
 
     def __post_init__(self) -> None:
@@ -175,6 +176,7 @@ class Candidate:
 
     quad: np.ndarray  # (4, 2) frame pixels
     coarse: bool  # found in a shrunk image: if the edge fit fails, search again at full resolution
+    rain: bool = False  # found by the rain-filtered pass
 
 
 class MarkerTracker:
@@ -229,7 +231,7 @@ class MarkerTracker:
             for k in np.flatnonzero(~ok & np.array([found[i].coarse for i in ids], dtype=bool)):
                 quads[k] = self._full_resolution(gray, int(ids[k]), quads[k])
         result = detections(quads, ids, rejected or [])
-        self._update(result)
+        self._update(result, {i: c.rain for i, c in found.items()})
         return result
 
     def _full_due(self) -> bool:
@@ -271,22 +273,31 @@ class MarkerTracker:
 
     def _search_rois(self, gray: np.ndarray, wanted: set[int], found: dict[int, Candidate],
                      rejected: list[np.ndarray] | None) -> list[tuple[Roi, np.ndarray]]:
-        """Search around the wanted tracked markers: plain, then rain-filtered where one is missed.
+        """Search around the wanted tracked markers, both passes until every expected one is found.
 
-        Returns the rain-filtered crops made.
+        The pass that found a crop's markers last time goes first (in rain, mostly the filtered
+        one). Returns the rain-filtered crops made.
         """
         opened_crops = []
+        rain = self.detector.rain_filter > 1
         for roi in self._rois(gray.shape, wanted):
             crop = gray[roi.y0:roi.y1, roi.x0:roi.x1]
-            quads, ids, rej = self._search_crop(crop, roi, rejected is not None)
-            if rejected is not None:
-                rejected += rej
-            _add(found, quads, ids, self._shrink(roi) < 1)
-            if roi.ids - set(found) and self.detector.rain_filter > 1:
-                opened = self.detector.opening(crop)
-                opened_crops.append((roi, opened))
-                quads, ids, _ = self._search_crop(opened, roi, False)
-                _add(found, quads, ids, self._shrink(roi) < 1)
+            coarse = self._shrink(roi) < 1
+            order = (True, False) if rain and any(self.tracks[i].rain for i in roi.ids) else (False, True)
+            for k, filtered in enumerate(order):
+                if k > 0 and not roi.ids - set(found):
+                    break
+                if filtered and not rain:
+                    continue
+                image = crop
+                if filtered:
+                    image = self.detector.opening(crop)
+                    opened_crops.append((roi, image))
+                keep = rejected is not None and not filtered
+                quads, ids, rej = self._search_crop(image, roi, keep)
+                if keep:
+                    rejected += rej
+                _add(found, quads, ids, coarse, filtered)
         return opened_crops
 
     def _shrink(self, roi: Roi) -> float:
@@ -377,19 +388,20 @@ class MarkerTracker:
                     image[window] = crop[r.y0 - y0:r.y1 - y0, r.x0 - x0:r.x1 - x0]
         return image
 
-    def _update(self, result: Detections) -> None:
+    def _update(self, result: Detections, rain: dict[int, bool]) -> None:
         """Move the tracks to this frame's markers; forget those missing too long."""
         for m in result.markers:
             old = self.tracks.get(m.id)
             velocity = np.zeros(2)
             if old is not None:
                 velocity = (m.corners.mean(axis=0) - old.corners.mean(axis=0)) / max(self.frame - old.seen, 1)
-            self.tracks[m.id] = Track(m.corners.copy(), velocity, self.frame)
+            self.tracks[m.id] = Track(m.corners.copy(), velocity, self.frame, rain.get(m.id, False))
         for i in [i for i, t in self.tracks.items() if self.frame - t.seen >= FORGET_AFTER]:
             del self.tracks[i]
 
 
-def _add(found: dict[int, Candidate], quads: np.ndarray, ids: np.ndarray, coarse: bool) -> None:
+def _add(found: dict[int, Candidate], quads: np.ndarray, ids: np.ndarray, coarse: bool, rain: bool = False
+         ) -> None:
     """Add the ids not found yet (earlier passes win)."""
     for q, i in zip(quads, ids, strict=True):
-        found.setdefault(int(i), Candidate(q, coarse))
+        found.setdefault(int(i), Candidate(q, coarse, rain))
