@@ -50,6 +50,21 @@ HD_SCALE = 1080 / 600  # focal length and principal point scale of the 1920x1080
 WRONG_SIDES = 0.5  # a detection whose centre is this many sides from its id's true centre has a wrong id
 BAD_CORNER_PX = 1.0
 METHODS = ("OpenCV default", "today (MarkerDetector)", "MarkerTracker")
+NOTES = """
+- *OpenCV default*: `ArucoDetector(dictionary, DetectorParameters())`, one pass, OpenCV's corners.
+  *today*: the stateless `MarkerDetector` (plain and rain-filtered passes, edge-fit corners).
+  *MarkerTracker*: `tracking/marker_tracker.py` around a `MarkerDetector`, fed each camera's frames in order.
+- 1920×1080: the same scenarios with every camera's focal length and principal point scaled by 1.8
+  (1080 / 600) and the extra width added to the field of view, so markers are 1.8× larger in pixels.
+- *markers found*: detections of the true id whose centre is within half a side of the true centre,
+  over every marker the simulator drew (far markers of other pairs included, so no detector reaches
+  100 %). *Corner RMS* and *> 1 px* are over those markers' corners against truth_frames.csv.
+  *Wrong ids*: detections of an id not in the frame or more than half a side away.
+- *median / 95th pct. frame*: of single frames' detection times; MarkerTracker's slow frames are its
+  whole-frame searches (*whole-frame searches*: share of frames).
+- Timings are CPU time of one thread on a machine shared with other jobs (load ~10 on 2 CPUs);
+  repeats vary by ~10-20 %.
+"""
 
 
 @dataclass
@@ -58,6 +73,7 @@ class Stats:
 
     cpu_ms: list[float] = field(default_factory=list)  # detection, mean CPU ms per frame, one per repeat
     pose_ms: list[float] = field(default_factory=list)  # poses of the rig's markers, the same way
+    frame_ms: list[list[float]] = field(default_factory=list)  # detection ms of every frame, per repeat
     frames: int = 0
     truth: int = 0  # true markers in the frames
     found: int = 0
@@ -149,12 +165,16 @@ def score(stats: Stats, found: list[Detections], truth: dict[tuple[str, int], di
 
 
 def run_clip(method: str, rig: Rig, camera: CameraModel, frames: list[np.ndarray]
-             ) -> tuple[float, float, list[Detections], int]:
-    """CPU ms per frame for detection, then for poses of the rig's markers, the detections and full searches."""
+             ) -> tuple[float, float, list[Detections], int, list[float]]:
+    """CPU ms per frame for detection and for poses of the rig's markers, detections, full searches, ms per frame."""
     detect, state = make(method, rig, camera)
     known = rig.marker_by_id
+    found, per_frame = [], []
     t0 = time.process_time()
-    found = [detect(g) for g in frames]
+    for g in frames:
+        t = time.process_time()
+        found.append(detect(g))
+        per_frame.append(1000 * (time.process_time() - t))
     t1 = time.process_time()
     for det in found:
         for m in det.markers:
@@ -162,12 +182,13 @@ def run_clip(method: str, rig: Rig, camera: CameraModel, frames: list[np.ndarray
                 estimate_pose(m, camera, rig.marker_size)
     t2 = time.process_time()
     n = max(len(frames), 1)
-    return 1000 * (t1 - t0) / n, 1000 * (t2 - t1) / n, found, getattr(state, "full_searches", 0)
+    return 1000 * (t1 - t0) / n, 1000 * (t2 - t1) / n, found, getattr(state, "full_searches", 0), per_frame
 
 
 def benchmark(size: str, seconds: float, repeats: int) -> dict[str, Stats]:
     """Every method on every camera of both scenarios at one size; timings per repeat over all clips."""
-    stats = {m: Stats(cpu_ms=[0.0] * repeats, pose_ms=[0.0] * repeats) for m in METHODS}
+    stats = {m: Stats(cpu_ms=[0.0] * repeats, pose_ms=[0.0] * repeats, frame_ms=[[] for _ in range(repeats)])
+             for m in METHODS}
     for name in SCENARIOS:
         folder = render(name, size, seconds)
         rig = load_rig(folder / "rig.yaml")
@@ -177,10 +198,11 @@ def benchmark(size: str, seconds: float, repeats: int) -> dict[str, Stats]:
             frames = [f.gray for f in video_frames(rig.resolve(entry.source))]
             for r in range(repeats):
                 for method in METHODS:
-                    det_ms, pose_ms, found, full = run_clip(method, rig, camera, frames)
+                    det_ms, pose_ms, found, full, per_frame = run_clip(method, rig, camera, frames)
                     s = stats[method]
                     s.cpu_ms[r] += det_ms * len(frames)  # summed here, divided by all frames below
                     s.pose_ms[r] += pose_ms * len(frames)
+                    s.frame_ms[r] += per_frame
                     if r == 0:
                         score(s, found, truth, entry.name)
                         s.frames += len(frames)
@@ -193,9 +215,10 @@ def benchmark(size: str, seconds: float, repeats: int) -> dict[str, Stats]:
 
 def table(results: dict[str, dict[str, Stats]]) -> str:
     """Markdown table: one row per resolution and method."""
-    lines = ["| frame | method | detection [ms/frame] | + poses [ms/frame] | speed-up vs OpenCV default | "
+    lines = ["| frame | method | detection [ms/frame] | + poses [ms/frame] | median / 95th pct. frame [ms] | "
+             "speed-up vs OpenCV default | "
              "markers found | corner RMS [px] | markers with a corner > 1 px | wrong ids | whole-frame searches |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for size, stats in results.items():
         base = statistics.median(stats[METHODS[0]].cpu_ms)
         for method, s in stats.items():
@@ -203,7 +226,10 @@ def table(results: dict[str, dict[str, Stats]]) -> str:
             pose = statistics.median(s.pose_ms)
             rms = np.sqrt(s.sq_err / max(s.corners, 1))
             full = f"{s.full_searches / max(s.frames, 1):.0%}" if method == METHODS[2] else "100 %"
-            lines.append(f"| {size} | {method} | {det:.2f} | {det + pose:.2f} | {base / det:.1f}x | "
+            median = statistics.median(float(np.median(f)) for f in s.frame_ms)
+            p95 = statistics.median(float(np.percentile(f, 95)) for f in s.frame_ms)
+            lines.append(f"| {size} | {method} | {det:.2f} | {det + pose:.2f} | {median:.2f} / {p95:.1f} | "
+                         f"{base / det:.1f}x | "
                          f"{s.found / max(s.truth, 1):.1%} | {rms:.3f} | {s.bad / max(s.found, 1):.1%} | "
                          f"{s.wrong} | {full} |")
     return "\n".join(lines)
@@ -232,7 +258,7 @@ def main() -> None:
         f"CPUs visible, shared), {date.today().isoformat()}: {', '.join(SCENARIOS)} at 15 FPS ({frames}), "
         f"single-threaded OpenCV, CPU time per frame (median of {repeats} repeats). Frames are decoded "
         "beforehand (decoding is not timed); '+ poses' adds IPPE poses of the rig's markers.\n\n"
-        f"{text}\n")
+        f"{text}\n{NOTES}")
 
 
 if __name__ == "__main__":
