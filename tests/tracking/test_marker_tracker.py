@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.synthetic import BACKGROUND, PlacedMarker, render
-from tracking.detection import MarkerDetector
+from tracking.detection import MarkerDetector, Refinement
 from tracking.images import video_frames
 from tracking.marker_tracker import MarkerTracker, Roi, merge_rois
 from tracking.pipeline import CameraTracker
@@ -138,3 +138,20 @@ def test_overlapping_regions_merge() -> None:
 def test_color_frames_are_converted(patches: dict[int, np.ndarray]) -> None:
     gray = compose([(patches[STILL_ID], *STILL_AT)])
     assert MarkerTracker(MarkerDetector()).detect(cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)).ids == [STILL_ID]
+
+
+@pytest.mark.parametrize("refinement", [Refinement.NONE, Refinement.SUBPIX])
+def test_opencv_refinements_match_the_stateless_detector(tmp_path: Path, patches: dict[int, np.ndarray],
+                                                        refinement: Refinement) -> None:
+    # without the edge fit crops are searched at full resolution, so corners are OpenCV's own
+    frames = encode(tmp_path / "slide.mp4", [compose([(patches[STILL_ID], *STILL_AT),
+                                                      (patches[MOVING_ID], 250 + 7 * k, 120 - 3 * k)])
+                                             for k in range(6)])
+    stateless = MarkerDetector(refinement=refinement)
+    tracker = MarkerTracker(MarkerDetector(refinement=refinement))
+    for gray in frames:
+        a, b = stateless.detect(gray), tracker.detect(gray)
+        assert a.ids == b.ids == [STILL_ID, MOVING_ID]
+        for m, n in zip(a.markers, b.markers, strict=True):
+            assert np.abs(m.corners - n.corners).max() < 1e-3
+    assert tracker.full_searches == 1
