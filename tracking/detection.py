@@ -90,6 +90,23 @@ def detector_parameters(refinement: Refinement = DEFAULT_REFINEMENT) -> cv2.aruc
     return params
 
 
+def find_quads(detector: cv2.aruco.ArucoDetector, image: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """One OpenCV pass: quads (B, 4, 2) float64, ids (B,) int and the rejected candidates (as OpenCV gives them)."""
+    corners, ids, rejected = detector.detectMarkers(image)
+    if ids is None:
+        return np.zeros((0, 4, 2)), np.zeros(0, dtype=int), list(rejected)
+    quads = np.array([c.reshape(4, 2) for c in corners], dtype=np.float64)
+    return quads, ids.reshape(-1).astype(int), list(rejected)
+
+
+def detections(quads: np.ndarray, ids: np.ndarray, rejected: list[np.ndarray]) -> Detections:
+    """Detections sorted by id from quads (B, 4, 2), ids (B,) and rejected candidates."""
+    markers = sorted((MarkerDetection(id=int(i), corners=q) for q, i in zip(quads, ids, strict=True)),
+                     key=lambda m: m.id)
+    return Detections(markers=markers, rejected=[r.reshape(4, 2).astype(np.float64) for r in rejected])
+
+
 class MarkerDetector:
     """Finds markers of one dictionary in grayscale frames."""
 
@@ -103,48 +120,43 @@ class MarkerDetector:
         self._detector = cv2.aruco.ArucoDetector(self.dictionary, detector_parameters(self.refinement))
         self._kernel = np.ones((rain_filter, rain_filter), np.uint8) if rain_filter > 1 else None
 
-    def _find(self, gray: np.ndarray, opened: np.ndarray | None
-              ) -> tuple[list[np.ndarray], np.ndarray | None, list[np.ndarray]]:
-        """Quads and ids: the plain pass, plus markers only the rain-filtered pass finds (rain cuts borders)."""
-        corners, ids, rejected = self._detector.detectMarkers(gray)
-        if opened is None:
-            return list(corners), ids, list(rejected)
-        corners2, ids2, _ = self._detector.detectMarkers(opened)
-        if ids2 is None:
-            return list(corners), ids, list(rejected)
-        seen = set() if ids is None else set(ids.reshape(-1).tolist())
-        extra = [(c, i) for c, i in zip(corners2, ids2.reshape(-1), strict=True) if int(i) not in seen]
-        if not extra:
-            return list(corners), ids, list(rejected)
-        all_ids = np.concatenate([ids.reshape(-1) if ids is not None else np.zeros(0, int), [i for _, i in extra]])
-        return list(corners) + [c for c, _ in extra], all_ids.reshape(-1, 1), list(rejected)
+    def opening(self, gray: np.ndarray) -> np.ndarray | None:
+        """The rain-filtered (H, W) image (grey opening), or None when the rain pass is off."""
+        return cv2.morphologyEx(gray, cv2.MORPH_OPEN, self._kernel) if self._kernel is not None else None
 
-    def _refine(self, gray: np.ndarray, opened: np.ndarray | None, quads: np.ndarray) -> np.ndarray:
-        """Edge-fit corners; on the rain-filtered image where the marker's cells are wide enough to survive it."""
+    def find(self, gray: np.ndarray, opened: np.ndarray | None, detector: cv2.aruco.ArucoDetector | None = None
+             ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+        """Unrefined quads (B, 4, 2) and ids (B,): the plain pass, plus ids only the rain-filtered pass finds."""
+        detector = detector or self._detector
+        quads, ids, rejected = find_quads(detector, gray)
+        if opened is None:
+            return quads, ids, rejected
+        quads2, ids2, _ = find_quads(detector, opened)
+        extra = ~np.isin(ids2, ids)  # rain cuts borders: the plain pass wins where both find an id
+        return np.concatenate([quads, quads2[extra]]), np.concatenate([ids, ids2[extra]]), rejected
+
+    def refine(self, gray: np.ndarray, opened: np.ndarray | None, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Edge-fit corners (B, 4, 2) and which fits succeeded (B,) (failures keep their corners).
+
+        On the rain-filtered image where the marker's cells are wide enough to survive it.
+        """
         cells = self.dictionary.markerSize + 2
         if opened is None:
-            return refine_corners_batch(gray, quads, self.camera, cells)[0]
+            return refine_corners_batch(gray, quads, self.camera, cells)
         side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
         big = side / cells >= RAIN_REFINE_MIN_CELL_PX
-        out = quads.copy()
+        out, ok = quads.copy(), np.zeros(len(quads), dtype=bool)
         for mask, image in ((big, opened), (~big, gray)):
             if mask.any():
-                out[mask] = refine_corners_batch(image, quads[mask], self.camera, cells)[0]
-        return out
+                out[mask], ok[mask] = refine_corners_batch(image, quads[mask], self.camera, cells)
+        return out, ok
 
     def detect(self, gray: np.ndarray, keep_rejected: bool = False) -> Detections:
         """Markers in one grayscale (H, W) uint8 frame."""
         if gray.ndim == 3:
             gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
-        opened = cv2.morphologyEx(gray, cv2.MORPH_OPEN, self._kernel) if self._kernel is not None else None
-        corners, ids, rejected = self._find(gray, opened)
-        markers = []
-        if ids is not None:
-            quads = np.array([c.reshape(4, 2) for c in corners], dtype=np.float64)
-            if self.refinement == Refinement.EDGES:  # all markers of the frame in vectorised calls
-                quads = self._refine(gray, opened, quads)
-            for quad, i in zip(quads, ids.reshape(-1), strict=True):
-                markers.append(MarkerDetection(id=int(i), corners=quad))
-        markers.sort(key=lambda m: m.id)
-        kept = [r.reshape(4, 2).astype(np.float64) for r in rejected] if keep_rejected else []
-        return Detections(markers=markers, rejected=kept)
+        opened = self.opening(gray)
+        quads, ids, rejected = self.find(gray, opened)
+        if len(ids) and self.refinement == Refinement.EDGES:  # all markers of the frame in vectorised calls
+            quads = self.refine(gray, opened, quads)[0]
+        return detections(quads, ids, rejected if keep_rejected else [])

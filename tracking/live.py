@@ -16,6 +16,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import cv2
+
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
 from tracking.filtering import ConeEstimate
@@ -76,7 +78,8 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
     """Process entry: track one camera until its source ends or stop is set; reconnect lost live sources."""
     rig = load_rig(rig_path)
     entry = next(c for c in rig.cameras if c.name == name)
-    tracker = CameraTracker.from_rig(rig, entry, refinement, packets=True)
+    cv2.setNumThreads(1)  # one process per camera already uses every core
+    tracker = CameraTracker.from_rig(rig, entry, refinement, packets=True, roi_tracking=True)
     out.put(SourceEvent(name, CameraState.STARTING, time.time(), "ready", first_capture_time(rig, entry)))
     while t0.value == 0.0 and not stop.is_set():
         time.sleep(0.01)

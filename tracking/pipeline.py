@@ -12,6 +12,7 @@ from tracking.camera import CameraModel, load_camera
 from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetector, Refinement
 from tracking.errors import InputError
 from tracking.images import Frame, frames
+from tracking.marker_tracker import MarkerTracker
 from tracking.offsets import PairGeometry, PairOffset, frame_offsets, pair_geometries
 from tracking.pose import Choice, MarkerPose, estimate_pose
 from tracking.rig import CameraEntry, Marker, Rig
@@ -61,7 +62,7 @@ class CameraTracker:
     rig: Rig
     entry: CameraEntry
     camera: CameraModel
-    detector: MarkerDetector
+    detector: MarkerDetector | MarkerTracker
     keep_color: bool = False
     packets: bool = False  # keep each frame's H.264 packet for recording
     geometries: list[PairGeometry] = field(default_factory=list)
@@ -73,10 +74,11 @@ class CameraTracker:
 
     @classmethod
     def from_rig(cls, rig: Rig, entry: CameraEntry, refinement: Refinement, keep_color: bool = False,
-                 packets: bool = False) -> CameraTracker:
-        """Load the camera's calibration and build its detector."""
+                 packets: bool = False, roi_tracking: bool = False) -> CameraTracker:
+        """Load the camera's calibration and build its detector (stateful MarkerTracker with roi_tracking)."""
         camera = load_camera(rig.resolve(entry.calibration))
-        return cls(rig, entry, camera, MarkerDetector(rig.dictionary, refinement, camera), keep_color, packets)
+        detector = MarkerDetector(rig.dictionary, refinement, camera)
+        return cls(rig, entry, camera, MarkerTracker(detector) if roi_tracking else detector, keep_color, packets)
 
     def process(self, frame: Frame) -> FrameResult:
         """Detect, estimate poses and the pair offsets of one frame."""
@@ -105,12 +107,12 @@ class CameraTracker:
 
 def track_rig(rig: Rig, refinement: Refinement = DEFAULT_REFINEMENT, cameras: list[str] | None = None,
               keep_color: bool = False, on_frame: Callable[[FrameResult], None] | None = None,
-              packets: bool = False) -> Iterator[FrameResult]:
-    """All cameras of a rig, merged into one stream ordered by capture time."""
+              packets: bool = False, roi_tracking: bool = False) -> Iterator[FrameResult]:
+    """All cameras of a rig, merged into one stream ordered by capture time (roi_tracking: see MarkerTracker)."""
     entries = [c for c in rig.cameras if cameras is None or c.name in cameras]
     if not entries:
         raise InputError(rig.path, "no cameras to track (expected at least one)", "cameras")
-    trackers = [CameraTracker.from_rig(rig, e, refinement, keep_color, packets) for e in entries]
+    trackers = [CameraTracker.from_rig(rig, e, refinement, keep_color, packets, roi_tracking) for e in entries]
     for result in heapq.merge(*(t.run() for t in trackers), key=lambda r: r.time):
         if on_frame is not None:
             on_frame(result)
