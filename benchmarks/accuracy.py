@@ -21,11 +21,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetection
 from tracking.evaluate import Evaluation, errors, evaluate_runs, truth_at
 from tracking.filtering import ConeEstimate
 from tracking.fusion import ESTIMATORS
-from tracking.pipeline import track_rig
-from tracking.rig import load_rig
+from tracking.images import Frame
+from tracking.pipeline import CameraTracker, track_rig
+from tracking.rig import Rig, load_rig
 
 REPO = Path(__file__).resolve().parents[1]
 CACHE = REPO / "benchmarks" / ".cache"
@@ -76,19 +78,33 @@ def frame(estimates: list[ConeEstimate]) -> pd.DataFrame:
                          **{a: [e.offset[i] for e in estimates] for i, a in enumerate(("dx", "dy", "dz"))}})
 
 
+def measure(rig: Rig, detections: list[tuple[str, float, dict[int, np.ndarray]]]) -> list:
+    """Pair offsets and body observations, in capture-time order, from cached detections (camera, time, corners)."""
+    trackers = {e.name: CameraTracker.from_rig(rig, e, DEFAULT_REFINEMENT) for e in rig.cameras}
+    out: list = []
+    for camera, t, corners in detections:
+        found = Detections([MarkerDetection(i, c) for i, c in sorted(corners.items())])
+        r = trackers[camera].measure(Frame(0, t, np.zeros((0, 0), np.uint8)), found)
+        out.extend(r.offsets)
+        if r.observation is not None:
+            out.append(r.observation)
+    return out
+
+
 def run(name: str, fps: float) -> dict:
     """Render, track once, estimate in every mode; timings included."""
     t0 = time.perf_counter()
     scene = render(name, fps)
     t1 = time.perf_counter()
     rig = load_rig(scene / "rig.yaml")
-    cache = scene / "measurements.pkl"
+    cache = scene / "detections.pkl"  # detection is the cost; poses and everything after are recomputed
     if cache.is_file():
-        measurements = pickle.loads(cache.read_bytes())
+        detections = pickle.loads(cache.read_bytes())
     else:
-        measurements = [o for r in track_rig(rig) for o in r.offsets]
-        cache.write_bytes(pickle.dumps(measurements))
+        detections = [(r.camera, r.time, {d.id: d.corners for d in r.detections.markers}) for r in track_rig(rig)]
+        cache.write_bytes(pickle.dumps(detections))
     t2 = time.perf_counter()
+    measurements = measure(rig, detections)
     cost_file = scene / "cost.json"  # measured when the scene was rendered and tracked, kept with the cache
     cost = json.loads(cost_file.read_text()) if cost_file.is_file() else {}
     cost.setdefault("render_s", t1 - t0)

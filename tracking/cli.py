@@ -192,6 +192,8 @@ def track(
                 if recorder is not None:
                     recorder.on_frame(result)
                 yield from result.offsets
+                if result.observation is not None:
+                    yield result.observation
 
         def recorded(estimates):
             for e in estimates:
