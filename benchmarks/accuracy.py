@@ -78,6 +78,17 @@ def frame(estimates: list[ConeEstimate]) -> pd.DataFrame:
                          **{a: [e.offset[i] for e in estimates] for i, a in enumerate(("dx", "dy", "dz"))}})
 
 
+def with_mounts(rig: Rig, name: str) -> Rig:
+    """The rig with its cameras' mounts from the scenario (stern: vessel), for renders older than the field."""
+    from tracking.sim.scenario import load_scenario
+
+    if "mount" in rig.path.read_text():
+        return rig
+    kinds = {c.name: c.kind for c in load_scenario(name + WEATHER).cameras}
+    cams = [c.model_copy(update={"mount": "vessel" if kinds.get(c.name) == "stern" else "drone"}) for c in rig.cameras]
+    return rig.model_copy(update={"cameras": cams})
+
+
 def measure(rig: Rig, detections: list[tuple[str, float, dict[int, np.ndarray]]]) -> list:
     """Pair offsets and body observations, in capture-time order, from cached detections (camera, time, corners)."""
     trackers = {e.name: CameraTracker.from_rig(rig, e, DEFAULT_REFINEMENT) for e in rig.cameras}
@@ -96,7 +107,7 @@ def run(name: str, fps: float) -> dict:
     t0 = time.perf_counter()
     scene = render(name, fps)
     t1 = time.perf_counter()
-    rig = load_rig(scene / "rig.yaml")
+    rig = with_mounts(load_rig(scene / "rig.yaml"), name)
     cache = scene / "detections.pkl"  # detection is the cost; poses and everything after are recomputed
     if cache.is_file():
         detections = pickle.loads(cache.read_bytes())

@@ -51,6 +51,17 @@ TOPSIDE_PLACEMENT_M = 1.0  # σ of the topside's position when a single view fir
 
 
 @dataclass(frozen=True)
+class CameraMotion:
+    """How a camera on one kind of mount may move: its pose's process noise and the prior of its rates."""
+
+    mount: str
+    angular_accel_psd: float  # rad²/s³, white-noise angular acceleration
+    accel_psd: float  # m²/s³, white-noise acceleration
+    prior_rate_radps: float
+    prior_speed_mps: float
+
+
+@dataclass(frozen=True)
 class FilterTuning:
     """Process and prior noise of the filter."""
 
@@ -60,10 +71,14 @@ class FilterTuning:
     prior_rotation_rad: float = 0.05
     prior_speed_mps: float = 1.0
     prior_rate_radps: float = 0.01
-    camera_accel_psd: float = 0.5  # m²/s³: a drone drifting, a vessel in waves
-    camera_angular_accel_psd: float = 1e-3  # rad²/s³
-    camera_prior_speed_mps: float = 1.0
-    camera_prior_rate_radps: float = 0.05
+    camera_motion: tuple[CameraMotion, ...] = (
+        CameraMotion("fixed", 1e-8, 1e-6, 1e-4, 1e-3),  # bolted to the jacket or a platform
+        CameraMotion("vessel", 1e-5, 0.1, 0.005, 0.3),  # on the crane vessel: metres and milliradians in waves
+        CameraMotion("drone", 1e-3, 0.5, 0.05, 1.0))  # flying: 0.3 m/s and 0.01 rad/s, changing within seconds
+
+    def motion(self, mount: str) -> CameraMotion:
+        """The motion prior of a camera mount."""
+        return next(m for m in self.camera_motion if m.mount == mount)
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -94,9 +109,10 @@ def process_noise(dt: float, tuning: FilterTuning) -> np.ndarray:
     return _block_noise(dt, [tuning.accel_psd] * 3 + [tuning.angular_accel_psd] * 3)
 
 
-def camera_process_noise(dt: float, tuning: FilterTuning) -> np.ndarray:
-    """(12, 12) process noise of one camera over dt seconds (rotation first, then position)."""
-    return _block_noise(dt, [tuning.camera_angular_accel_psd] * 3 + [tuning.camera_accel_psd] * 3)
+def camera_process_noise(dt: float, tuning: FilterTuning, mount: str) -> np.ndarray:
+    """(12, 12) process noise of one camera on a mount over dt seconds (rotation first, then position)."""
+    m = tuning.motion(mount)
+    return _block_noise(dt, [m.angular_accel_psd] * 3 + [m.accel_psd] * 3)
 
 
 def prior_covariance(tuning: FilterTuning) -> np.ndarray:
@@ -193,6 +209,7 @@ class CameraState:
     """The nominal pose of one camera in the jacket frame, about which the filter holds its error."""
 
     index: int  # first index of the camera's block in the state
+    mount: str  # the rig's camera mount: its motion prior
     T_jacket_camera: np.ndarray | None = None  # (4, 4), None until a jacket view places the camera
     consecutive_rejects: int = 0
 
@@ -211,7 +228,7 @@ class TopsideFilter:
     last_accepted: dict[str, float] = field(default_factory=dict)  # camera -> capture time of its topside view
 
     def __post_init__(self) -> None:
-        self.cameras = {c.name: CameraState(STATE * (1 + k)) for k, c in enumerate(self.rig.cameras)}
+        self.cameras = {c.name: CameraState(STATE * (1 + k), c.mount) for k, c in enumerate(self.rig.cameras)}
         self.size = STATE * (1 + len(self.cameras))
         self.x = np.zeros(self.size) if self.x is None else self.x
         if self.P is None:
@@ -237,7 +254,8 @@ class TopsideFilter:
         b = slice(cam.index, cam.index + STATE)
         self.P[b, :] = 0.0
         self.P[:, b] = 0.0
-        sd = [1.0] * 6 + [self.tuning.camera_prior_rate_radps] * 3 + [self.tuning.camera_prior_speed_mps] * 3
+        motion = self.tuning.motion(cam.mount)
+        sd = [1.0] * 6 + [motion.prior_rate_radps] * 3 + [motion.prior_speed_mps] * 3
         self.P[b, b] = np.diag(np.square(sd))
         if covariance is not None:
             self.P[cam.index:cam.index + 6, cam.index:cam.index + 6] = covariance
@@ -252,10 +270,10 @@ class TopsideFilter:
         self.x = F @ self.x
         self.P = F @ self.P @ F.T
         self.P[:STATE, :STATE] += process_noise(dt, self.tuning)
-        Qc = camera_process_noise(dt, self.tuning)
         for cam in self.cameras.values():
             if cam.T_jacket_camera is not None:
-                self.P[cam.index:cam.index + STATE, cam.index:cam.index + STATE] += Qc
+                self.P[cam.index:cam.index + STATE, cam.index:cam.index + STATE] += \
+                    camera_process_noise(dt, self.tuning, cam.mount)
         self._fold_cameras()
         self.time = time if self.time is None else max(self.time, time)
         return F
