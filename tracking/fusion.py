@@ -389,6 +389,14 @@ class TopsideFilter:
                                             ** 2)) for i in seen)
                 k = int(np.argmin([misfit(T) for T, _ in options]))
                 cam.T_jacket_camera = None
+            elif o.topside is not None and not self.topside_placed:  # at the start: the only option under
+                # which the topside can hang near level (later, an unsettled topside would mislead it)
+                tilts = [min(float(np.linalg.norm(rotvec(T[:3, :3].T @ T_ct[:3, :3]))) for T_ct in
+                             [o.topside.T_camera_body, *(a for a, _ in o.topside.alternatives)]) for T, _ in options]
+                level = [k for k, tilt in enumerate(tilts) if tilt <= MAX_PAIR_TILT_RAD]
+                if len(level) != 1:
+                    return False
+                k = level[0]
             else:  # wait for a view that settles it
                 return False
             options = [options[k]]
@@ -416,9 +424,8 @@ class TopsideFilter:
         k = int(np.argmin(tilts)) if topside.choice != Choice.UNIQUE else 0
         if tilts[k] > MAX_PAIR_TILT_RAD:
             return False
-        self.x[:STATE] = 0.0
+        self.x[:STATE] = 0.0  # level, as the prior: one far marker's tilt is worth less than the prior's 0.05 rad
         self.x[:3] = poses[k][:3, 3]
-        self.x[3:6] = rotvec(poses[k][:3, :3])
         self.P[:STATE, :] = 0.0
         self.P[:, :STATE] = 0.0
         self.P[:STATE, :STATE] = prior_covariance(self.tuning)
@@ -438,6 +445,42 @@ class TopsideFilter:
         uv = pc @ K.T
         return (uv[:, :2] / uv[:, 2:3]).reshape(-1)
 
+    def _corner_update(self, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray,
+                       topside: bool) -> bool:
+        """One Kalman update with the corners (4, 2) of some markers of one body; False when none was used."""
+        assert self.x is not None and self.P is not None
+        sigma = CORNER_NOISE_PX
+        Hs, ys, Rs = [], [], []
+        for marker, z in sorted(corners.items()):
+            h = self._predict_corners(cam, marker, self.x, K)
+            H = np.zeros((8, self.size))
+            for k in [*(range(6) if topside else ()), *range(cam.index, cam.index + 6)]:
+                x1 = self.x.copy()
+                x1[k] += JACOBIAN_STEP
+                H[:, k] = (self._predict_corners(cam, marker, x1, K) - h) / JACOBIAN_STEP
+            y = z.reshape(-1) - h
+            HPH = H @ self.P @ H.T
+            R = sigma**2 * np.eye(8)
+            for j in range(4):  # robust: a corner far off (rain, glare) counts as if at the threshold
+                b = slice(2 * j, 2 * j + 2)
+                d2_j = float(y[b] @ np.linalg.solve(HPH[b, b] + R[b, b], y[b]))
+                if d2_j > CORNER_HUBER_CHI2:
+                    R[b, b] *= d2_j / CORNER_HUBER_CHI2
+            if float(y @ np.linalg.solve(HPH + R, y)) > CORNER_GATE_CHI2:
+                self.rejected += 1
+                continue
+            Hs.append(H)
+            ys.append(y)
+            Rs.append(R)
+        if not Hs:
+            return False
+        H = np.vstack(Hs)
+        R = np.zeros((H.shape[0], H.shape[0]))
+        for k, R_k in enumerate(Rs):
+            R[8 * k:8 * k + 8, 8 * k:8 * k + 8] = R_k
+        self._apply(H, np.concatenate(ys), R)
+        return True
+
     def observe(self, o: BodyObservation) -> bool:
         """Apply one camera frame's marker corners; False when no topside corner of it was used.
 
@@ -456,40 +499,10 @@ class TopsideFilter:
             if o.topside is None or not self._place_topside(cam, o.topside):
                 o = BodyObservation(o.time, o.camera, o.jacket, None,
                                     {i: c for i, c in o.corners.items() if i in self.jacket_corners}, o.K)
-        sigma = CORNER_NOISE_PX
-        Hs, ys, Rs, used_topside, used_jacket = [], [], [], False, False
-        for marker, z in sorted(o.corners.items()):
-            topside = marker in self.topside_corners
-            if topside and not self.topside_placed:
-                continue
-            h = self._predict_corners(cam, marker, self.x, o.K)
-            H = np.zeros((8, self.size))
-            for k in [*(range(6) if topside else ()), *range(cam.index, cam.index + 6)]:
-                x1 = self.x.copy()
-                x1[k] += JACOBIAN_STEP
-                H[:, k] = (self._predict_corners(cam, marker, x1, o.K) - h) / JACOBIAN_STEP
-            y = z.reshape(-1) - h
-            HPH = H @ self.P @ H.T
-            R = sigma**2 * np.eye(8)
-            for j in range(4):  # robust: a corner far off (rain, glare) counts as if at the threshold
-                b = slice(2 * j, 2 * j + 2)
-                d2_j = float(y[b] @ np.linalg.solve(HPH[b, b] + R[b, b], y[b]))
-                if d2_j > CORNER_HUBER_CHI2:
-                    R[b, b] *= d2_j / CORNER_HUBER_CHI2
-            if float(y @ np.linalg.solve(HPH + R, y)) > CORNER_GATE_CHI2:
-                self.rejected += 1
-                continue
-            Hs.append(H)
-            ys.append(y)
-            Rs.append(R)
-            used_topside |= topside
-            used_jacket |= not topside
-        if Hs:
-            H = np.vstack(Hs)
-            R = np.zeros((H.shape[0], H.shape[0]))
-            for k, R_k in enumerate(Rs):
-                R[8 * k:8 * k + 8, 8 * k:8 * k + 8] = R_k
-            self._apply(H, np.concatenate(ys), R)
+        jacket = {i: z for i, z in o.corners.items() if i in self.jacket_corners}
+        topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
+        used_jacket = self._corner_update(cam, jacket, o.K, False)  # the camera first, then the topside
+        used_topside = self._corner_update(cam, topside, o.K, True)  # through the camera just refined
         if o.jacket is not None:
             cam.consecutive_rejects = 0 if used_jacket else cam.consecutive_rejects + 1
             if cam.consecutive_rejects >= REINIT_AFTER_REJECTS:  # lost: place it again at its next view
