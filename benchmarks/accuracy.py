@@ -211,7 +211,8 @@ def main() -> None:
         f"Procedures rendered with fog 50 % and rain 30 % (all of them, not only 3 and 4 as in the paper), "
         f"920×600, {args.fps:g} FPS per camera, cameras unsynchronised; corners by edge fit; errors at the "
         "monitored cones. Modes: **paper** = the paper's method (camera 1 gives Δx, Δz, camera 2 Δy, Δz, "
-        "10-sample running averages); **fused** = the live rigid-body Kalman filter of all cameras (default); "
+        "10-sample running averages); **fused** = the live Kalman filter of the topside and every camera, "
+        "measured by the markers' corners (default); "
         "**smoothed** = the same with a Rauch-Tung-Striebel pass over the recorded run. Lag by cross-correlation; "
         "availability = share of the time with an estimate at most 0.5 s old.",
         "",

@@ -3,20 +3,22 @@
 One Kalman filter for the whole installation. Its state holds the topside (12,): translation t and
 small rotation ω of the topside frame in the jacket frame, and their rates; and every camera (12,
 each): its pose in the jacket frame as an error about a nominal T_jacket_camera (rotation δθ, position
-δp) and its rates. A camera frame gives two measurements: the jacket's pose in the camera, fitted
-to every jacket marker it shows, and the topside's, fitted to every topside marker. The jacket
-pose places the camera; the filter keeps the camera's pose over time (a fixed camera barely moves,
-a drone drifts slowly), so a far camera's poorly seen marker tilt is averaged away instead of
-turning depth into height and sideways offset at every frame. The topside pose then measures the
-topside through the camera's filtered pose, correlations and all.
+δp) and its rates, with a motion prior from the rig's mount (fixed, vessel, drone).
+
+A camera frame is measured by its markers' corners: each marker's four undistorted corners against
+their projection through T_camera_jacket (jacket markers) or T_camera_jacket · T_jacket_topside
+(topside markers); the camera first, from its jacket corners, then the topside. A far camera's
+poorly seen marker tilt is thus averaged into the camera's pose over time instead of turning depth
+into height and sideways offset at every frame, and the markers' precise bearings do the measuring.
+Body poses (pose.estimate_body_pose) only place a camera or the topside at first sight.
 
 Pair offsets (topside marker S displaced from its mated position, jacket frame) are accepted too:
 to first order in ω, o = (R - I) r_S + t ≈ t - [r_S]× ω, linear in the state.
 
-Each measurement comes with its own covariance (from the PnP Jacobians), is applied at its capture
-time (cameras need no synchronisation), and the offset at every cone follows from the topside pose,
-including cones no camera sees. Outliers such as IPPE flips are gated by their Mahalanobis distance;
-the IPPE alternative nearest the prediction is used. Offline, a Rauch-Tung-Striebel pass smooths the run.
+Measurements are applied at their capture times (cameras need no synchronisation), and the offset
+at every cone follows from the topside pose, including cones no camera sees. Corners far off are
+down-weighted (Huber-like), markers and pair offsets gated by their Mahalanobis distance. Offline,
+a Rauch-Tung-Striebel pass smooths the run.
 """
 
 from __future__ import annotations
@@ -389,8 +391,7 @@ class TopsideFilter:
                                             ** 2)) for i in seen)
                 k = int(np.argmin([misfit(T) for T, _ in options]))
                 cam.T_jacket_camera = None
-            elif o.topside is not None and not self.topside_placed:  # at the start: the only option under
-                # which the topside can hang near level (later, an unsettled topside would mislead it)
+            elif o.topside is not None:  # until then: the only option under which the topside hangs near level
                 tilts = [min(float(np.linalg.norm(rotvec(T[:3, :3].T @ T_ct[:3, :3]))) for T_ct in
                              [o.topside.T_camera_body, *(a for a, _ in o.topside.alternatives)]) for T, _ in options]
                 level = [k for k, tilt in enumerate(tilts) if tilt <= MAX_PAIR_TILT_RAD]
