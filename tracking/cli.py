@@ -208,6 +208,8 @@ def track(
                 for sink in sinks:
                     sink.on_frame(result)
                 yield from result.offsets
+                if result.observation is not None:
+                    yield result.observation
 
         def recorded(estimates):
             for e in estimates:

@@ -1,17 +1,24 @@
-"""Fusion of every camera and pair into the topside's rigid pose relative to the jacket, over time.
+"""Fusion of every camera into the topside's rigid pose relative to the jacket, over time.
 
-One Kalman filter for the whole topside. State (12,): translation t and small rotation ω of the
-topside frame in the jacket frame, and their rates. A pair offset (topside marker S displaced from
-its mated position, jacket frame) is, to first order in ω,
+One Kalman filter for the whole installation. Its state holds the topside (12,): translation t and
+small rotation ω of the topside frame in the jacket frame, and their rates; and every camera (12,
+each): its pose in the jacket frame as an error about a nominal T_jacket_camera (rotation δθ, position
+δp) and its rates, with a motion prior from the rig's mount (fixed, vessel, drone).
 
-    o = (R - I) r_S + t ≈ t + ω × r_S = t - [r_S]× ω,
+A camera frame is measured by its markers' corners: each marker's four undistorted corners against
+their projection through T_camera_jacket (jacket markers) or T_camera_jacket · T_jacket_topside
+(topside markers); the camera first, from its jacket corners, then the topside. A far camera's
+poorly seen marker tilt is thus averaged into the camera's pose over time instead of turning depth
+into height and sideways offset at every frame, and the markers' precise bearings do the measuring.
+Body poses (pose.estimate_body_pose) only place a camera or the topside at first sight.
 
-linear in the state, with r_S the topside marker's centre in the topside frame. Each measurement
-comes with its own covariance (from the markers' PnP Jacobians), so a camera's depth counts for
-little and its lateral axes for much, with no per-camera axis rule. Measurements are applied at
-their capture times, cameras need no synchronisation, and the offset at every cone follows from
-the pose, including cones no camera sees. Outliers such as IPPE flips are gated by their
-Mahalanobis distance. Offline, a Rauch-Tung-Striebel pass smooths the whole run.
+Pair offsets (topside marker S displaced from its mated position, jacket frame) are accepted too:
+to first order in ω, o = (R - I) r_S + t ≈ t - [r_S]× ω, linear in the state.
+
+Measurements are applied at their capture times (cameras need no synchronisation), and the offset
+at every cone follows from the topside pose, including cones no camera sees. Corners far off are
+down-weighted (Huber-like), markers and pair offsets gated by their Mahalanobis distance. Offline,
+a Rauch-Tung-Striebel pass smooths the run.
 """
 
 from __future__ import annotations
@@ -19,27 +26,46 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from tracking.filtering import ConeEstimate, paper_filter, raw_estimates
-from tracking.offsets import PairOffset
-from tracking.pose import Choice
+from tracking.offsets import MAX_PAIR_TILT_RAD, BodyObservation, PairOffset, body_geometry
+from tracking.pose import BodyPose, Choice, body_object_points
 from tracking.rig import Rig
 
-STATE = 12
-GATE_CHI2 = 16.27  # 3 degrees of freedom, 99.9 %
-REINIT_AFTER_REJECTS = 15  # consecutive gated measurements before the filter reopens its covariance
+STATE = 12  # per body: pose (6) and rates (6)
+GATE_CHI2 = {3: 16.27, 6: 22.46}  # by degrees of freedom, 99.9 %
+REINIT_AFTER_REJECTS = 15  # consecutive gated measurements before the filter reopens a covariance
 CONTRIBUTION_WINDOW_S = 0.5  # a camera counts as contributing when it was accepted this recently
 AMBIGUOUS_VARIANCE_GAIN = 25.0  # σ × 5 for poses IPPE could not settle: their error is bimodal, not Gaussian
-MEASUREMENT_FLOOR_M = 0.01  # σ added to every measurement: biases the corner noise does not explain
+MEASUREMENT_FLOOR_M = 0.01  # σ added to every measured position: biases the corner noise does not explain
 # (tilt of far markers, first-order rotation, timing); 2σ then holds 0.92-0.94 of errors on clear video
+ROTATION_FLOOR_RAD = 1e-3  # σ added to every measured body rotation, for the same reasons
 REPORT_MAX_SIGMA_M = 0.05  # a cone whose offset σ exceeds this on any axis is reported as unknown (NaN):
 # 3σ must fit in the 150 mm concentricity tolerance for a number to be worth showing
+JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
+CORNER_NOISE_PX = 0.15  # σ of a corner coordinate: edge-fit corners in fog and rain have a median error of 0.1 px
+CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
+# (1-4 % of corners are > 1 px off in rain: a heavy tail a Gaussian would follow)
+CORNER_GATE_CHI2 = 26.12  # 8 degrees of freedom (a marker's four corners), 99.9 %
+TOPSIDE_PLACEMENT_M = 1.0  # σ of the topside's position when a single view first places it
+
+
+@dataclass(frozen=True)
+class CameraMotion:
+    """How a camera on one kind of mount may move: its pose's process noise and the prior of its rates."""
+
+    mount: str
+    angular_accel_psd: float  # rad²/s³, white-noise angular acceleration
+    accel_psd: float  # m²/s³, white-noise acceleration
+    prior_rate_radps: float
+    prior_speed_mps: float
 
 
 @dataclass(frozen=True)
 class FilterTuning:
-    """Process and prior noise of the topside filter."""
+    """Process and prior noise of the filter."""
 
     accel_psd: float = 0.05  # m²/s³: white-noise acceleration of the translation (crane and waves)
     angular_accel_psd: float = 1e-6  # rad²/s³: a topside hanging from cranes yaws and rolls slowly
@@ -47,6 +73,14 @@ class FilterTuning:
     prior_rotation_rad: float = 0.05
     prior_speed_mps: float = 1.0
     prior_rate_radps: float = 0.01
+    camera_motion: tuple[CameraMotion, ...] = (
+        CameraMotion("fixed", 1e-8, 1e-6, 1e-4, 1e-3),  # bolted to the jacket or a platform
+        CameraMotion("vessel", 1e-5, 0.1, 0.005, 0.3),  # on the crane vessel: metres and milliradians in waves
+        CameraMotion("drone", 1e-3, 0.5, 0.05, 1.0))  # flying: 0.3 m/s and 0.01 rad/s, changing within seconds
+
+    def motion(self, mount: str) -> CameraMotion:
+        """The motion prior of a camera mount."""
+        return next(m for m in self.camera_motion if m.mount == mount)
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -54,36 +88,109 @@ def skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def transition(dt: float) -> np.ndarray:
-    """(12, 12) constant-velocity transition over dt seconds."""
-    F = np.eye(STATE)
-    F[:6, 6:] = dt * np.eye(6)
+def transition(dt: float, blocks: int = 1) -> np.ndarray:
+    """(12 B, 12 B) constant-velocity transition of B bodies over dt seconds."""
+    F = np.eye(STATE * blocks)
+    for b in range(blocks):
+        F[b * STATE:b * STATE + 6, b * STATE + 6:(b + 1) * STATE] = dt * np.eye(6)
     return F
 
 
-def process_noise(dt: float, tuning: FilterTuning) -> np.ndarray:
-    """(12, 12) white-noise-acceleration process noise over dt seconds."""
+def _block_noise(dt: float, psds: list[float]) -> np.ndarray:
+    """(12, 12) white-noise-acceleration process noise of one body, psds (6,) per pose axis."""
     Q = np.zeros((STATE, STATE))
-    for i, q in enumerate([tuning.accel_psd] * 3 + [tuning.angular_accel_psd] * 3):
+    for i, q in enumerate(psds):
         Q[i, i] = q * dt**3 / 3
         Q[i, i + 6] = Q[i + 6, i] = q * dt**2 / 2
         Q[i + 6, i + 6] = q * dt
     return Q
 
 
+def process_noise(dt: float, tuning: FilterTuning) -> np.ndarray:
+    """(12, 12) white-noise-acceleration process noise of the topside over dt seconds."""
+    return _block_noise(dt, [tuning.accel_psd] * 3 + [tuning.angular_accel_psd] * 3)
+
+
+def camera_process_noise(dt: float, tuning: FilterTuning, mount: str) -> np.ndarray:
+    """(12, 12) process noise of one camera on a mount over dt seconds (rotation first, then position)."""
+    m = tuning.motion(mount)
+    return _block_noise(dt, [m.angular_accel_psd] * 3 + [m.accel_psd] * 3)
+
+
 def prior_covariance(tuning: FilterTuning) -> np.ndarray:
-    """(12, 12) initial covariance: the topside anywhere near, barely rotated."""
+    """(12, 12) initial covariance of the topside: anywhere near, barely rotated."""
     sd = [tuning.prior_position_m] * 3 + [tuning.prior_rotation_rad] * 3 + \
          [tuning.prior_speed_mps] * 3 + [tuning.prior_rate_radps] * 3
     return np.diag(np.square(sd))
 
 
 def point_offset_matrix(r: np.ndarray) -> np.ndarray:
-    """(3, 12) H: offset of a topside point at r (3,) from the state, o = t - [r]× ω."""
+    """(3, 12) H: offset of a topside point at r (3,) from the topside state, o = t - [r]× ω."""
     H = np.zeros((3, STATE))
     H[:, :3] = np.eye(3)
     H[:, 3:6] = -skew(r)
     return H
+
+
+def rotvec(R: np.ndarray) -> np.ndarray:
+    """(3,) rotation vector of a rotation matrix, exact for small angles too.
+
+    cv2.Rodrigues returns zero below 1e-5 rad, which would blind numeric Jacobians; below 90° the angle
+    comes from atan2(sin, cos) of the skew and symmetric parts instead.
+    """
+    c = (np.trace(R) - 1.0) / 2.0
+    if c < 0.0:  # beyond 90°: OpenCV is exact there
+        return cv2.Rodrigues(R)[0].reshape(3)
+    v = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    s = float(np.linalg.norm(v))
+    return v if s < 1e-12 else v * (np.arctan2(s, c) / s)
+
+
+def rotation(v: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation matrix of a rotation vector."""
+    return cv2.Rodrigues(np.asarray(v, dtype=np.float64).reshape(3))[0]
+
+
+def pose_residual(T_measured: np.ndarray, T_predicted: np.ndarray) -> np.ndarray:
+    """(6,) measured minus predicted (4, 4) pose: rotation vector of R_m R_pᵀ, then translation difference."""
+    return np.concatenate([rotvec(T_measured[:3, :3] @ T_predicted[:3, :3].T),
+                           T_measured[:3, 3] - T_predicted[:3, 3]])
+
+
+def inverse(T: np.ndarray) -> np.ndarray:
+    """(4, 4) inverse of a rigid transform."""
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3].T
+    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return out
+
+
+def _pose_params(T: np.ndarray) -> np.ndarray:
+    return np.concatenate([rotvec(T[:3, :3]), T[:3, 3]])
+
+
+def _from_params(p: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = rotation(p[:3])
+    T[:3, 3] = p[3:]
+    return T
+
+
+def _numeric_jacobian(f: Callable[[np.ndarray], np.ndarray], x0: np.ndarray) -> np.ndarray:
+    """(M, N) forward-difference Jacobian of f at x0 (N,)."""
+    base = f(x0)
+    J = np.empty((base.size, x0.size))
+    for k in range(x0.size):
+        step = np.zeros(x0.size)
+        step[k] = JACOBIAN_STEP
+        J[:, k] = (f(x0 + step) - base) / JACOBIAN_STEP
+    return J
+
+
+def measured_covariance(T_measured: np.ndarray, covariance: np.ndarray, T_predicted: np.ndarray) -> np.ndarray:
+    """(6, 6) covariance of pose_residual from a PnP pose's (rvec, tvec) covariance (6, 6)."""
+    J = _numeric_jacobian(lambda p: pose_residual(_from_params(p), T_predicted), _pose_params(T_measured))
+    return J @ covariance @ J.T
 
 
 @dataclass
@@ -100,20 +207,42 @@ class FilterStep:
 
 
 @dataclass
+class CameraState:
+    """The nominal pose of one camera in the jacket frame, about which the filter holds its error."""
+
+    index: int  # first index of the camera's block in the state
+    mount: str  # the rig's camera mount: its motion prior
+    T_jacket_camera: np.ndarray | None = None  # (4, 4), None until a jacket view places the camera
+    consecutive_rejects: int = 0
+
+
+@dataclass
 class TopsideFilter:
-    """The rigid-body Kalman filter of one installation."""
+    """The Kalman filter of one installation: the topside and every camera of the rig."""
 
     rig: Rig
     tuning: FilterTuning = field(default_factory=FilterTuning)
-    x: np.ndarray = field(default_factory=lambda: np.zeros(STATE))
+    x: np.ndarray | None = None
     P: np.ndarray | None = None
     time: float | None = None
     rejected: int = 0  # total gated measurements
     consecutive_rejects: int = 0
-    last_accepted: dict[str, float] = field(default_factory=dict)  # camera -> capture time
+    last_accepted: dict[str, float] = field(default_factory=dict)  # camera -> capture time of its topside view
 
     def __post_init__(self) -> None:
-        self.P = prior_covariance(self.tuning) if self.P is None else self.P
+        self.cameras = {c.name: CameraState(STATE * (1 + k), c.mount) for k, c in enumerate(self.rig.cameras)}
+        self.size = STATE * (1 + len(self.cameras))
+        self.x = np.zeros(self.size) if self.x is None else self.x
+        if self.P is None:
+            self.P = np.zeros((self.size, self.size))
+            self.P[:STATE, :STATE] = prior_covariance(self.tuning)
+            for cam in self.cameras.values():
+                self._reset_camera(cam)
+        self.topside_placed = False
+        geometry = body_geometry(self.rig)
+        self.jacket_corners = {i: body_object_points([T], self.rig.marker_size) for i, T in geometry.jacket.items()}
+        self.topside_corners = {i: body_object_points([T], self.rig.marker_size)
+                                for i, T in geometry.topside.items()}
         markers = self.rig.marker_by_id
         self.topside_points = {m.id: np.array(m.center) for m in markers.values() if m.body == "topside"}
         self.cones = {c: np.array(p) for c, p in self.rig.cones.items()}
@@ -121,44 +250,274 @@ class TopsideFilter:
             if pair.cone not in self.cones:
                 self.cones[pair.cone] = self.topside_points[pair.topside]
 
+    def _reset_camera(self, cam: CameraState, covariance: np.ndarray | None = None) -> None:
+        """Forget a camera: its block decoupled, its pose covariance given (or unit), its rates' prior."""
+        assert self.P is not None and self.x is not None
+        b = slice(cam.index, cam.index + STATE)
+        self.P[b, :] = 0.0
+        self.P[:, b] = 0.0
+        motion = self.tuning.motion(cam.mount)
+        sd = [1.0] * 6 + [motion.prior_rate_radps] * 3 + [motion.prior_speed_mps] * 3
+        self.P[b, b] = np.diag(np.square(sd))
+        if covariance is not None:
+            self.P[cam.index:cam.index + 6, cam.index:cam.index + 6] = covariance
+        self.x[b] = 0.0
+        cam.consecutive_rejects = 0
+
     def predict(self, time: float) -> np.ndarray:
         """Move the state to a capture time; returns the transition used."""
+        assert self.P is not None and self.x is not None
         dt = 0.0 if self.time is None else max(0.0, time - self.time)
-        F = transition(dt)
+        F = transition(dt, 1 + len(self.cameras))
         self.x = F @ self.x
-        self.P = F @ self.P @ F.T + process_noise(dt, self.tuning)
+        self.P = F @ self.P @ F.T
+        self.P[:STATE, :STATE] += process_noise(dt, self.tuning)
+        for cam in self.cameras.values():
+            if cam.T_jacket_camera is not None:
+                self.P[cam.index:cam.index + STATE, cam.index:cam.index + STATE] += \
+                    camera_process_noise(dt, self.tuning, cam.mount)
+        self._fold_cameras()
         self.time = time if self.time is None else max(self.time, time)
         return F
 
-    def update(self, m: PairOffset) -> bool:
-        """Apply one pair offset; False when it was gated out as an outlier."""
-        if not self.last_accepted and m.choice == Choice.AMBIGUOUS:
-            return False  # never start from a pose IPPE could not settle: nothing could gate it
-        H = point_offset_matrix(self.topside_points[m.topside_id])
-        gain = AMBIGUOUS_VARIANCE_GAIN if m.choice == Choice.AMBIGUOUS else 1.0
-        d2, y, S, R = np.inf, None, None, None
-        for offset, cov in ((m.offset, m.covariance), *m.alternatives):  # the IPPE combination nearest the prediction
-            R_k = gain * cov + MEASUREMENT_FLOOR_M**2 * np.eye(3)
-            y_k = offset - H @ self.x
-            S_k = H @ self.P @ H.T + R_k
-            d2_k = float(y_k @ np.linalg.solve(S_k, y_k))
-            if d2_k < d2:
-                d2, y, S, R = d2_k, y_k, S_k, R_k
-        if not np.isfinite(d2) or d2 > GATE_CHI2:
-            self.rejected += 1
-            self.consecutive_rejects += 1
-            if self.consecutive_rejects >= REINIT_AFTER_REJECTS:  # lost: reopen, keep the state
-                self.P = self.P + prior_covariance(self.tuning)
-                self.consecutive_rejects = 0
-            return False
-        assert y is not None and S is not None and R is not None
+    def _fold_cameras(self) -> None:
+        """Move the cameras' pose errors (and the motion their rates imply) into their nominal poses.
+
+        Done once per step, at the prediction: within a step every error is about the predicted nominal,
+        which keeps the smoother's differences between steps consistent.
+        """
+        assert self.x is not None
+        for cam in self.cameras.values():
+            if cam.T_jacket_camera is None:
+                continue
+            i = cam.index
+            T = np.eye(4)
+            T[:3, :3] = rotation(self.x[i:i + 3]) @ cam.T_jacket_camera[:3, :3]
+            T[:3, 3] = cam.T_jacket_camera[:3, 3] + self.x[i + 3:i + 6]
+            cam.T_jacket_camera = T
+            self.x[i:i + 6] = 0.0
+
+    def _camera_pose(self, cam: CameraState, x: np.ndarray) -> np.ndarray:
+        """(4, 4) T_jacket_camera of a state."""
+        assert cam.T_jacket_camera is not None
+        i = cam.index
+        T = np.eye(4)
+        T[:3, :3] = rotation(x[i:i + 3]) @ cam.T_jacket_camera[:3, :3]
+        T[:3, 3] = cam.T_jacket_camera[:3, 3] + x[i + 3:i + 6]
+        return T
+
+    @staticmethod
+    def _topside_pose(x: np.ndarray) -> np.ndarray:
+        """(4, 4) T_jacket_topside of a state."""
+        T = np.eye(4)
+        T[:3, :3] = rotation(x[3:6])
+        T[:3, 3] = x[:3]
+        return T
+
+    def _apply(self, H: np.ndarray, y: np.ndarray, R: np.ndarray) -> None:
+        """Kalman update with H (M, n), innovation y (M,) and measurement covariance R (M, M)."""
+        assert self.P is not None and self.x is not None
+        S = H @ self.P @ H.T + R
         K = np.linalg.solve(S, H @ self.P).T
         self.x = self.x + K @ y
-        I_KH = np.eye(STATE) - K @ H
+        I_KH = np.eye(self.size) - K @ H
         self.P = I_KH @ self.P @ I_KH.T + K @ R @ K.T  # Joseph form: stays symmetric positive
+
+    def _best(self, candidates: list[tuple[np.ndarray, np.ndarray]], H: np.ndarray, gain: float,
+              floor: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """The candidate (innovation, covariance) nearest the prediction: (d², y, R)."""
+        assert self.P is not None
+        HPH = H @ self.P @ H.T
+        scored = []
+        for y_k, cov in candidates:
+            R_k = cov + floor
+            scored.append((float(y_k @ np.linalg.solve(HPH + R_k, y_k)), y_k, cov))
+        scored.sort(key=lambda c: c[0])
+        d2, y, cov = scored[0]
+        gate = GATE_CHI2[H.shape[0]]
+        if gain != 1.0 and not (d2 <= gate and all(c[0] > gate for c in scored[1:])):  # the prediction did
+            R = gain * cov + floor  # not settle the ambiguity either: inflate
+            return float(y @ np.linalg.solve(HPH + R, y)), y, R
+        return d2, y, cov + floor
+
+    def _gated(self, d2: float, dof: int) -> bool:
+        return not np.isfinite(d2) or d2 > GATE_CHI2[dof]
+
+    def _topside_rejected(self) -> None:
+        assert self.P is not None
+        self.rejected += 1
+        self.consecutive_rejects += 1
+        if self.consecutive_rejects >= REINIT_AFTER_REJECTS:  # lost: reopen, keep the state
+            self.P[:STATE, :STATE] += prior_covariance(self.tuning)
+            self.consecutive_rejects = 0
+
+    def update(self, m: PairOffset | BodyObservation) -> bool:
+        """Apply one measurement; False when (its topside part) was gated out or could not be used."""
+        if isinstance(m, BodyObservation):
+            return self.observe(m)
+        assert self.x is not None
+        if not self.last_accepted and m.choice == Choice.AMBIGUOUS:
+            return False  # never start from a pose IPPE could not settle: nothing could gate it
+        H = np.zeros((3, self.size))
+        H[:, :STATE] = point_offset_matrix(self.topside_points[m.topside_id])
+        gain = AMBIGUOUS_VARIANCE_GAIN if m.choice == Choice.AMBIGUOUS else 1.0
+        candidates = [(o - H @ self.x, c) for o, c in ((m.offset, m.covariance), *m.alternatives)]
+        d2, y, R = self._best(candidates, H, gain, MEASUREMENT_FLOOR_M**2 * np.eye(3))
+        if self._gated(d2, 3):
+            self._topside_rejected()
+            return False
+        self._apply(H, y, R)
         self.consecutive_rejects = 0
         self.last_accepted[m.camera] = m.time
         return True
+
+    def _place_camera(self, cam: CameraState, o: BodyObservation) -> bool:
+        """First view of the jacket: the camera's pose from it; an ambiguous one settled by the topside's corners."""
+        jb = o.jacket
+        assert jb is not None
+        assert self.x is not None
+        options = [(jb.T_camera_body, jb.covariance), *jb.alternatives]
+        gain = 1.0
+        if jb.choice != Choice.UNIQUE:
+            seen = [i for i in o.corners if i in self.topside_corners]
+            assert self.P is not None
+            settled = self.topside_placed and np.sqrt(np.diag(self.P)[:3]).max() <= REPORT_MAX_SIGMA_M
+            if settled and seen:  # the option that puts the topside's corners where they are
+                def misfit(T_cj: np.ndarray) -> float:
+                    cam.T_jacket_camera = inverse(T_cj)
+                    zero = self.x.copy()
+                    zero[cam.index:cam.index + 6] = 0.0
+                    return sum(float(np.sum((self._predict_corners(cam, i, zero, o.K) - o.corners[i].reshape(-1))
+                                            ** 2)) for i in seen)
+                k = int(np.argmin([misfit(T) for T, _ in options]))
+                cam.T_jacket_camera = None
+            elif o.topside is not None:  # until then: the only option under which the topside hangs near level
+                tilts = [min(float(np.linalg.norm(rotvec(T[:3, :3].T @ T_ct[:3, :3]))) for T_ct in
+                             [o.topside.T_camera_body, *(a for a, _ in o.topside.alternatives)]) for T, _ in options]
+                level = [k for k, tilt in enumerate(tilts) if tilt <= MAX_PAIR_TILT_RAD]
+                if len(level) != 1:
+                    return False
+                k = level[0]
+            else:  # wait for a view that settles it
+                return False
+            options = [options[k]]
+            gain = AMBIGUOUS_VARIANCE_GAIN
+        T_cj, cov = options[0]
+        cov = gain * cov
+        T_jc = inverse(T_cj)
+
+        def camera_error(p: np.ndarray) -> np.ndarray:
+            return pose_residual(inverse(_from_params(p)), T_jc)
+
+        J = _numeric_jacobian(camera_error, _pose_params(T_cj))
+        cam.T_jacket_camera = T_jc
+        floor = np.diag([ROTATION_FLOOR_RAD**2] * 3 + [MEASUREMENT_FLOOR_M**2] * 3)
+        self._reset_camera(cam, J @ cov @ J.T + floor)
+        return True
+
+    def _place_topside(self, cam: CameraState, topside: BodyPose) -> bool:
+        """First view of the topside: its pose from the placed camera (the option hanging nearest level)."""
+        assert self.x is not None and self.P is not None
+        T_jc = self._camera_pose(cam, self.x)
+        options = [T @ np.eye(4) for T, _ in [(topside.T_camera_body, None), *topside.alternatives]]
+        poses = [T_jc @ T for T in options]
+        tilts = [float(np.linalg.norm(rotvec(T[:3, :3]))) for T in poses]
+        k = int(np.argmin(tilts)) if topside.choice != Choice.UNIQUE else 0
+        if tilts[k] > MAX_PAIR_TILT_RAD:
+            return False
+        self.x[:STATE] = 0.0  # level, as the prior: one far marker's tilt is worth less than the prior's 0.05 rad
+        self.x[:3] = poses[k][:3, 3]
+        self.P[:STATE, :] = 0.0
+        self.P[:, :STATE] = 0.0
+        self.P[:STATE, :STATE] = prior_covariance(self.tuning)
+        self.P[:3, :3] = np.eye(3) * TOPSIDE_PLACEMENT_M**2
+        self.topside_placed = True
+        return True
+
+    def _predict_corners(self, cam: CameraState, marker: int, x: np.ndarray, K: np.ndarray) -> np.ndarray:
+        """(8,) ideal pixels of a marker's corners predicted from a state."""
+        T = inverse(self._camera_pose(cam, x))
+        if marker in self.topside_corners:
+            T = T @ self._topside_pose(x)
+            X = self.topside_corners[marker]
+        else:
+            X = self.jacket_corners[marker]
+        pc = X @ T[:3, :3].T + T[:3, 3]
+        uv = pc @ K.T
+        return (uv[:, :2] / uv[:, 2:3]).reshape(-1)
+
+    def _corner_update(self, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray,
+                       topside: bool) -> bool:
+        """One Kalman update with the corners (4, 2) of some markers of one body; False when none was used."""
+        assert self.x is not None and self.P is not None
+        sigma = CORNER_NOISE_PX
+        Hs, ys, Rs = [], [], []
+        for marker, z in sorted(corners.items()):
+            h = self._predict_corners(cam, marker, self.x, K)
+            H = np.zeros((8, self.size))
+            for k in [*(range(6) if topside else ()), *range(cam.index, cam.index + 6)]:
+                x1 = self.x.copy()
+                x1[k] += JACOBIAN_STEP
+                H[:, k] = (self._predict_corners(cam, marker, x1, K) - h) / JACOBIAN_STEP
+            y = z.reshape(-1) - h
+            HPH = H @ self.P @ H.T
+            R = sigma**2 * np.eye(8)
+            for j in range(4):  # robust: a corner far off (rain, glare) counts as if at the threshold
+                b = slice(2 * j, 2 * j + 2)
+                d2_j = float(y[b] @ np.linalg.solve(HPH[b, b] + R[b, b], y[b]))
+                if d2_j > CORNER_HUBER_CHI2:
+                    R[b, b] *= d2_j / CORNER_HUBER_CHI2
+            if float(y @ np.linalg.solve(HPH + R, y)) > CORNER_GATE_CHI2:
+                self.rejected += 1
+                continue
+            Hs.append(H)
+            ys.append(y)
+            Rs.append(R)
+        if not Hs:
+            return False
+        H = np.vstack(Hs)
+        R = np.zeros((H.shape[0], H.shape[0]))
+        for k, R_k in enumerate(Rs):
+            R[8 * k:8 * k + 8, 8 * k:8 * k + 8] = R_k
+        self._apply(H, np.concatenate(ys), R)
+        return True
+
+    def observe(self, o: BodyObservation) -> bool:
+        """Apply one camera frame's marker corners; False when no topside corner of it was used.
+
+        The corners are measured directly: each marker's four corners (8 pixel coordinates) against
+        their projection through the camera's and the topside's poses in the state. The IPPE
+        ambiguity of a lone marker never arises; poses only place a camera or the topside at first sight.
+        """
+        assert self.x is not None and self.P is not None
+        cam = self.cameras.get(o.camera)
+        if cam is None:
+            return False
+        if cam.T_jacket_camera is None:
+            if o.jacket is None or not self._place_camera(cam, o):
+                return False
+        if not self.topside_placed:
+            if o.topside is None or not self._place_topside(cam, o.topside):
+                o = BodyObservation(o.time, o.camera, o.jacket, None,
+                                    {i: c for i, c in o.corners.items() if i in self.jacket_corners}, o.K)
+        jacket = {i: z for i, z in o.corners.items() if i in self.jacket_corners}
+        topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
+        used_jacket = self._corner_update(cam, jacket, o.K, False)  # the camera first, then the topside
+        used_topside = self._corner_update(cam, topside, o.K, True)  # through the camera just refined
+        if o.jacket is not None:
+            cam.consecutive_rejects = 0 if used_jacket else cam.consecutive_rejects + 1
+            if cam.consecutive_rejects >= REINIT_AFTER_REJECTS:  # lost: place it again at its next view
+                cam.T_jacket_camera = None
+                self._reset_camera(cam)
+        if o.topside is not None and self.topside_placed and not used_topside:
+            self.consecutive_rejects += 1
+            if self.consecutive_rejects >= REINIT_AFTER_REJECTS:  # lost: place it again at its next view
+                self.topside_placed = False
+                self.consecutive_rejects = 0
+        if used_topside:
+            self.consecutive_rejects = 0
+            self.last_accepted[o.camera] = o.time
+        return used_topside
 
     def contributing(self) -> tuple[str, ...]:
         """Cameras accepted within CONTRIBUTION_WINDOW_S of the current time."""
@@ -170,30 +529,40 @@ class TopsideFilter:
         """Offset and covariance at every cone from a state (default: the current one)."""
         x = self.x if x is None else x
         P = self.P if P is None else P
+        assert x is not None and P is not None
         time = self.time if time is None else time
         cameras = self.contributing() if cameras is None else cameras
         out = []
         for cone, r in sorted(self.cones.items()):
             H = point_offset_matrix(r)
-            cov = H @ P @ H.T
-            offset = H @ x if np.sqrt(np.diag(cov)).max() <= REPORT_MAX_SIGMA_M else np.full(3, np.nan)
+            cov = H @ P[:STATE, :STATE] @ H.T
+            offset = H @ x[:STATE] if np.sqrt(np.diag(cov)).max() <= REPORT_MAX_SIGMA_M else np.full(3, np.nan)
             out.append(ConeEstimate(time, cone, offset, cameras, cov))
         return out
 
 
-def _frames(measurements: Iterable[PairOffset]) -> Iterator[list[PairOffset]]:
-    """Group time-ordered measurements by capture time (one group per camera frame)."""
-    group: list[PairOffset] = []
+Measurement = PairOffset | BodyObservation
+
+
+def _frames(measurements: Iterable[Measurement]) -> Iterator[list[Measurement]]:
+    """Group time-ordered measurements by camera frame; a frame's body observation replaces its pair offsets."""
+    group: list[Measurement] = []
     for m in measurements:
         if group and (m.time != group[0].time or m.camera != group[0].camera):
-            yield group
+            yield preferred(group)
             group = []
         group.append(m)
     if group:
-        yield group
+        yield preferred(group)
 
 
-def fused_estimates(rig: Rig, measurements: Iterable[PairOffset], tuning: FilterTuning | None = None
+def preferred(group: list[Measurement]) -> list[Measurement]:
+    """A camera frame's body observations if it has any (they hold its pair offsets), else its pair offsets."""
+    observations: list[Measurement] = [m for m in group if isinstance(m, BodyObservation)]
+    return observations or group
+
+
+def fused_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: FilterTuning | None = None
                     ) -> Iterator[ConeEstimate]:
     """Live: after each frame with measurements, the filtered offset at every cone."""
     kf = TopsideFilter(rig, tuning or FilterTuning())
@@ -205,13 +574,18 @@ def fused_estimates(rig: Rig, measurements: Iterable[PairOffset], tuning: Filter
             yield from kf.cone_estimates()
 
 
-def smoothed_estimates(rig: Rig, measurements: Iterable[PairOffset], tuning: FilterTuning | None = None
+def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: FilterTuning | None = None
                        ) -> list[ConeEstimate]:
-    """Recorded: the filter forward, then a Rauch-Tung-Striebel pass backward; the offset at every cone."""
+    """Recorded: the filter forward, then a Rauch-Tung-Striebel pass backward; the offset at every cone.
+
+    The cameras' nominal poses move as the filter runs; the backward pass treats their errors about
+    the nominal of each step as the state, which holds to first order.
+    """
     kf = TopsideFilter(rig, tuning or FilterTuning())
     steps: list[FilterStep] = []
     for group in _frames(measurements):
         F = kf.predict(group[0].time)
+        assert kf.x is not None and kf.P is not None
         x_pred, P_pred = kf.x.copy(), kf.P.copy()
         for m in group:
             kf.update(m)
@@ -222,7 +596,7 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[PairOffset], tuning: Fil
     xs, Ps = [steps[-1].x], [steps[-1].P]
     for k in range(len(steps) - 2, -1, -1):
         nxt = steps[k + 1]
-        C = steps[k].P @ nxt.F.T @ np.linalg.pinv(nxt.P_pred)
+        C = np.linalg.solve(nxt.P_pred, nxt.F @ steps[k].P).T  # P Fᵀ P_pred⁻¹ (P_pred symmetric)
         xs.append(steps[k].x + C @ (xs[-1] - nxt.x_pred))
         Ps.append(steps[k].P + C @ (Ps[-1] - nxt.P_pred) @ C.T)
     xs.reverse()
@@ -233,9 +607,13 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[PairOffset], tuning: Fil
     return out
 
 
-ESTIMATORS: dict[str, Callable[[Rig, Iterable[PairOffset]], Iterable[ConeEstimate]]] = {
+def _pair_offsets(measurements: Iterable[Measurement]) -> Iterator[PairOffset]:
+    return (m for m in measurements if isinstance(m, PairOffset))
+
+
+ESTIMATORS: dict[str, Callable[[Rig, Iterable[Measurement]], Iterable[ConeEstimate]]] = {
     "fused": fused_estimates,  # live, the default
     "smoothed": smoothed_estimates,  # recorded runs
-    "paper": paper_filter,  # the paper's method, for comparison
-    "raw": lambda rig, measurements: raw_estimates(measurements),  # every camera's pair offset
+    "paper": lambda rig, measurements: paper_filter(rig, _pair_offsets(measurements)),  # the paper's method
+    "raw": lambda rig, measurements: raw_estimates(_pair_offsets(measurements)),  # every camera's pair offset
 }

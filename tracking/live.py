@@ -21,7 +21,7 @@ import cv2
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
 from tracking.filtering import ConeEstimate
-from tracking.fusion import FilterTuning, TopsideFilter
+from tracking.fusion import FilterTuning, TopsideFilter, preferred
 from tracking.pipeline import CameraTracker, FrameResult
 from tracking.rig import Rig, load_rig
 from tracking.sources import (
@@ -239,9 +239,10 @@ class LiveTracker:
             t, _, result, _ = heapq.heappop(self._pending)
             self._newest = max(self._newest, t)
             update.results.append(result)
-            if result.offsets:
+            measurements = [*result.offsets, *([result.observation] if result.observation is not None else [])]
+            if measurements:  # the same steps as fusion.fused_estimates
                 self.kf.predict(t)
-                for m in result.offsets:
+                for m in preferred(measurements):
                     self.kf.update(m)
                 if self.kf.last_accepted:
                     update.estimates.extend(self.kf.cone_estimates())

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from tracking.pose import Choice, MarkerPose
+from tracking.camera import CameraModel
+from tracking.pose import BodyPose, Choice, MarkerPose, estimate_body_pose
 from tracking.rig import Pair, Rig
 
 JACOBIAN_STEP = 1e-6  # rad or m, for the numeric Jacobian of the offset
@@ -135,3 +136,52 @@ def frame_offsets(geometries: list[PairGeometry], poses: dict[int, MarkerPose], 
     """Offsets of every pair whose two markers are both among the poses of one frame."""
     return [pair_offset(g, poses[g.pair.jacket], poses[g.pair.topside], camera, time)
             for g in geometries if g.pair.jacket in poses and g.pair.topside in poses]
+
+
+@dataclass(frozen=True)
+class BodyGeometry:
+    """The markers of each body as the rig fixes them: (4, 4) T_body_marker by id."""
+
+    jacket: dict[int, np.ndarray]
+    topside: dict[int, np.ndarray]
+
+
+def body_geometry(rig: Rig) -> BodyGeometry:
+    """Marker poses in their body frames (the topside frame is the jacket frame when mated)."""
+    by_body: dict[str, dict[int, np.ndarray]] = {"jacket": {}, "topside": {}}
+    for m in rig.markers:
+        by_body[m.body][m.id] = m.T_body_marker
+    return BodyGeometry(by_body["jacket"], by_body["topside"])
+
+
+@dataclass(frozen=True)
+class BodyObservation:
+    """One camera frame's view of the two bodies: each fitted to all of its markers the frame shows."""
+
+    time: float  # capture time of the frame, s
+    camera: str
+    jacket: BodyPose | None  # T_camera_jacket, None when no jacket marker is seen
+    topside: BodyPose | None  # T_camera_topside (topside frame = jacket frame when mated)
+    corners: dict[int, np.ndarray] = field(default_factory=dict)  # id -> (4, 2) undistorted (ideal) pixels
+    K: np.ndarray = field(default_factory=lambda: np.eye(3))  # (3, 3) camera matrix of the ideal pixels
+
+    @property
+    def choice(self) -> Choice:
+        """The weaker of the two bodies' choices."""
+        choices = [b.choice for b in (self.jacket, self.topside) if b is not None]
+        return _weaker(*choices) if len(choices) == 2 else choices[0]
+
+
+def observe_bodies(geometry: BodyGeometry, poses: dict[int, MarkerPose], camera: CameraModel, name: str,
+                   time: float, marker_size: float) -> BodyObservation | None:
+    """Both bodies' poses in one camera frame from its marker poses; None when it shows no rig marker."""
+    bodies: list[BodyPose | None] = []
+    for body, markers in (("jacket", geometry.jacket), ("topside", geometry.topside)):
+        ids = sorted(i for i in poses if i in markers)
+        bodies.append(estimate_body_pose(body, [poses[i] for i in ids], [markers[i] for i in ids], camera,
+                                         marker_size) if ids else None)
+    if bodies[0] is None and bodies[1] is None:
+        return None
+    corners = {i: camera.undistort_points(p.corners) for i, p in poses.items()
+               if i in geometry.jacket or i in geometry.topside}
+    return BodyObservation(time, name, bodies[0], bodies[1], corners, camera.K)

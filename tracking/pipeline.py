@@ -13,7 +13,16 @@ from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetector, R
 from tracking.errors import InputError
 from tracking.images import Frame, frames
 from tracking.marker_tracker import MarkerTracker
-from tracking.offsets import PairGeometry, PairOffset, frame_offsets, pair_geometries
+from tracking.offsets import (
+    BodyGeometry,
+    BodyObservation,
+    PairGeometry,
+    PairOffset,
+    body_geometry,
+    frame_offsets,
+    observe_bodies,
+    pair_geometries,
+)
 from tracking.pose import Choice, MarkerPose, estimate_pose
 from tracking.rig import CameraEntry, Marker, Rig
 
@@ -28,6 +37,7 @@ class FrameResult:
     poses: dict[int, MarkerPose]  # rig markers only, by id
     offsets: list[PairOffset]
     unknown_ids: list[int]  # detected ids that the rig does not list
+    observation: BodyObservation | None = None  # both bodies' poses and all rig markers' corners, for fusion
     tracked: bool = True  # False: recorded but not searched, to keep up in real time
 
     @property
@@ -67,10 +77,12 @@ class CameraTracker:
     packets: bool = False  # keep each frame's H.264 packet for recording
     geometries: list[PairGeometry] = field(default_factory=list)
     markers: dict[int, Marker] = field(default_factory=dict)
+    bodies: BodyGeometry | None = None
 
     def __post_init__(self) -> None:
         self.geometries = pair_geometries(self.rig)
         self.markers = self.rig.marker_by_id
+        self.bodies = body_geometry(self.rig)
 
     @classmethod
     def from_rig(cls, rig: Rig, entry: CameraEntry, refinement: Refinement, keep_color: bool = False,
@@ -85,12 +97,18 @@ class CameraTracker:
         if (frame.gray.shape[1], frame.gray.shape[0]) != self.camera.image_size:
             raise InputError(self.entry.source, f"frame is {frame.gray.shape[1]}x{frame.gray.shape[0]} but the "
                              f"calibration is for {self.camera.width}x{self.camera.height}", "image size")
-        detections = self.detector.detect(frame.gray, keep_rejected=self.keep_color)
+        return self.measure(frame, self.detector.detect(frame.gray, keep_rejected=self.keep_color))
+
+    def measure(self, frame: Frame, detections: Detections) -> FrameResult:
+        """Poses, pair offsets and the body observation of one frame's detections."""
         poses = {d.id: estimate_pose(d, self.camera, self.rig.marker_size) for d in detections.markers
                  if d.id in self.markers}
         unknown = [d.id for d in detections.markers if d.id not in self.markers]
         offsets = frame_offsets(self.geometries, poses, self.entry.name, frame.time)
-        return FrameResult(self.entry.name, frame, detections, poses, offsets, unknown)
+        assert self.bodies is not None
+        observation = observe_bodies(self.bodies, poses, self.camera, self.entry.name, frame.time,
+                                     self.rig.marker_size)
+        return FrameResult(self.entry.name, frame, detections, poses, offsets, unknown, observation)
 
     def skip(self, frame: Frame) -> FrameResult:
         """A frame recorded but not searched for markers (the tracker is behind real time)."""

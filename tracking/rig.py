@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from tracking.errors import InputError, read_yaml
 
 Body = Literal["jacket", "topside"]
+Mount = Literal["fixed", "vessel", "drone"]  # on the jacket or a platform; on the crane vessel (waves); flying
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
 _D = float(np.sqrt(0.5))
@@ -96,12 +97,13 @@ class Pair(_Model):
 
 
 class CameraEntry(_Model):
-    """A camera: its calibration file, its video source and its clock offset."""
+    """A camera: its calibration file, its video source, its clock offset and how it is mounted."""
 
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
     calibration: str
     source: str
     time_offset: float = 0.0  # s, added to the video's timestamps to give capture time on the common clock
+    mount: Mount = "drone"  # how much the camera may move: the fusion filter's motion prior for its pose
 
 
 class Rig(_Model):

@@ -38,6 +38,7 @@ def test_files_and_rig(runs: tuple[Path, Path]) -> None:
     out, _ = runs
     rig = load_rig(out / "rig.yaml")
     assert [c.name for c in rig.cameras] == ["stern_A", "drone_A", "drone_D1", "drone_D2"]
+    assert [c.mount for c in rig.cameras] == ["vessel", "drone", "drone", "drone"]  # the filter's motion prior
     assert set(rig.cones) == {"A", "B", "C", "D"}  # every cone tip, monitored or not
     for pair in rig.pairs:
         assert pair.mated == pytest.approx([0.0, 0.0, 2.0])

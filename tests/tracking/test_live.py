@@ -40,7 +40,8 @@ def test_flat_out_replay_equals_offline_fusion(installation: Path) -> None:
     assert all(r.frame.packet is not None and r.frame.gray is None for r in results)  # pixels stay in the worker
     live = [e for u in updates for e in u.estimates]
     rig = load_rig(installation / "rig.yaml")
-    offline = list(fused_estimates(rig, (m for r in track_rig(rig, roi_tracking=True) for m in r.offsets)))
+    offline = list(fused_estimates(rig, (m for r in track_rig(rig, roi_tracking=True)
+                                         for m in [*r.offsets, r.observation] if m is not None)))
     assert len(live) == len(offline) > 0
     for a, b in zip(live, offline, strict=True):
         assert (a.time, a.cone) == (b.time, b.cone)

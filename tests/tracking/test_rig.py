@@ -33,6 +33,7 @@ def test_loads_and_derives(tmp_path: Path) -> None:
     T = rig.T_W_S_mated(rig.pairs[0])
     np.testing.assert_allclose(T[:3, 3], [0, 1.8, 0])  # straight up the jacket marker's y axis
     np.testing.assert_allclose(T[:3, :3], np.eye(3))
+    assert rig.cameras[0].mount == "drone"  # the loosest motion prior unless the rig says otherwise
 
 
 def test_face_rotation_is_right_handed_and_looks_out() -> None:
@@ -52,6 +53,7 @@ def test_face_rotation_is_right_handed_and_looks_out() -> None:
     (lambda d: d["pairs"][0].update(mated=[0, 0, 2.5]),
      "pairs[0].mated: [0.0, 0.0, 2.5] disagrees with the marker centres"),
     (lambda d: d["cameras"][0].pop("source"), "cameras[0].source: Field required"),
+    (lambda d: d["cameras"][0].update(mount="boat"), "cameras[0].mount: got 'boat'"),
 ])
 def test_bad_rig_names_the_field(tmp_path: Path, change, message: str) -> None:
     import copy

@@ -120,7 +120,8 @@ def render_scenario(sc: Scenario, out: Path, duration: float, quiet: bool = Fals
                 progress.update(task, advance=1, fps=done / (time.perf_counter() - t_start))
             writer.close()
     entries = [CameraEntry(name=c.name, calibration=f"calibration/{c.name}.yaml", source=f"{c.name}.mp4",
-                           time_offset=p.time_offset) for c, p in zip(cams, plans, strict=True)]
+                           time_offset=p.time_offset, mount="vessel" if c.kind == "stern" else "drone")
+               for c, p in zip(cams, plans, strict=True)]
     save_rig(out / "rig.yaml", world.rig(entries))
     times = np.arange(0.0, duration + 1e-9, 1.0 / sc.truth_rate)
     truth_table(world, times).to_csv(out / "truth.csv", index=False, float_format="%.6f")
