@@ -23,6 +23,7 @@ a Rauch-Tung-Striebel pass smooths the run.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
@@ -94,6 +95,13 @@ def transition(dt: float, blocks: int = 1) -> np.ndarray:
     for b in range(blocks):
         F[b * STATE:b * STATE + 6, b * STATE + 6:(b + 1) * STATE] = dt * np.eye(6)
     return F
+
+
+@functools.cache
+def _pose_rate_indices(blocks: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the pose and of the rate components of B stacked bodies (12 each: 6 pose, 6 rates)."""
+    base = np.arange(blocks)[:, None] * STATE
+    return (base + np.arange(6)).ravel(), (base + 6 + np.arange(6)).ravel()
 
 
 def _block_noise(dt: float, psds: list[float]) -> np.ndarray:
@@ -268,9 +276,15 @@ class TopsideFilter:
         """Move the state to a capture time; returns the transition used."""
         assert self.P is not None and self.x is not None
         dt = 0.0 if self.time is None else max(0.0, time - self.time)
-        F = transition(dt, 1 + len(self.cameras))
-        self.x = F @ self.x
-        self.P = F @ self.P @ F.T
+        blocks = 1 + len(self.cameras)
+        F = transition(dt, blocks)
+        pose, rate = _pose_rate_indices(blocks)  # F = I + dt E, E moving rates into poses: F P Fᵀ in O(n²)
+        self.x = self.x.copy()
+        self.x[pose] += dt * self.x[rate]
+        P = self.P.copy()
+        P[pose, :] += dt * P[rate, :]
+        P[:, pose] += dt * P[:, rate]
+        self.P = P
         self.P[:STATE, :STATE] += process_noise(dt, self.tuning)
         for cam in self.cameras.values():
             if cam.T_jacket_camera is not None:
@@ -317,11 +331,12 @@ class TopsideFilter:
     def _apply(self, H: np.ndarray, y: np.ndarray, R: np.ndarray) -> None:
         """Kalman update with H (M, n), innovation y (M,) and measurement covariance R (M, M)."""
         assert self.P is not None and self.x is not None
-        S = H @ self.P @ H.T + R
-        K = np.linalg.solve(S, H @ self.P).T
+        PHt = self.P @ H.T  # (n, M): O(n² M), where the Joseph form would cost O(n³) for n = 12 per body
+        S = H @ PHt + R
+        K = np.linalg.solve(S, PHt.T).T
         self.x = self.x + K @ y
-        I_KH = np.eye(self.size) - K @ H
-        self.P = I_KH @ self.P @ I_KH.T + K @ R @ K.T  # Joseph form: stays symmetric positive
+        P = self.P - K @ PHt.T
+        self.P = (P + P.T) / 2  # stays symmetric
 
     def _best(self, candidates: list[tuple[np.ndarray, np.ndarray]], H: np.ndarray, gain: float,
               floor: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
