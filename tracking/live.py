@@ -58,7 +58,7 @@ class CameraHealth:
     last_capture: float | None = None  # capture time of the newest frame
     last_wall: float | None = None  # wall time it arrived
     fps: float = 0.0
-    skipped: int = 0  # frames recorded but not searched, to stay in real time
+    skipped: int = 0  # frames recorded only (not searched, or not fused), to stay in real time
 
 
 @dataclass
@@ -238,7 +238,12 @@ class LiveTracker:
         while self._pending and (flush or self._pending[0][0] <= mark or wall - self._pending[0][3] >= self.reorder_s):
             t, _, result, _ = heapq.heappop(self._pending)
             self._newest = max(self._newest, t)
+            if self.realtime and result.tracked and self.now() - t > LATE_S:  # the main process is behind:
+                result = replace(result, tracked=False)  # record the frame, skip its fusion, catch up
+                self.health[result.camera].skipped += 1
             update.results.append(result)
+            if not result.tracked:
+                continue
             measurements = [*result.offsets, *([result.observation] if result.observation is not None else [])]
             if measurements:  # the same steps as fusion.fused_estimates
                 self.kf.predict(t)

@@ -38,7 +38,7 @@ class FrameResult:
     offsets: list[PairOffset]
     unknown_ids: list[int]  # detected ids that the rig does not list
     observation: BodyObservation | None = None  # both bodies' poses and all rig markers' corners, for fusion
-    tracked: bool = True  # False: recorded but not searched, to keep up in real time
+    tracked: bool = True  # False: recorded only (not searched, or not fused), to keep up in real time
 
     @property
     def time(self) -> float:

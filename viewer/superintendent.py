@@ -101,7 +101,7 @@ def cone_markdown(reading: ConeReading, stale_s: float = STALE_S) -> str:
 
 def cameras_markdown(cameras: Mapping[str, CameraHealth], now: float) -> str:
     """Every camera's state, frame rate, age of its newest frame, markers."""
-    lines = ["| camera | state | fps | newest frame | markers | not searched |", "|---|---|---:|---:|---:|---:|"]
+    lines = ["| camera | state | fps | newest frame | markers | skipped |", "|---|---|---:|---:|---:|---:|"]
     for name, h in sorted(cameras.items()):
         age = "—" if h.last_capture is None else f"{max(0.0, now - h.last_capture):.2f} s"
         state = CAMERA_WORDS[h.state] + (f" ({h.detail})" if h.detail and h.detail != "ready" else "")
