@@ -174,6 +174,8 @@ class Recorder:
         self._open(self._segment_path(len(self._segments)))
         if closed is not None:
             self._compactor.start(closed)
+        if self._last_update is not None:  # every segment opens with the superintendent's figures
+            self._log_board(self._last_update)
         for results in self._gop.values():  # the frames a decoder needs before the next keyframe
             for r in results:
                 set_capture_time(self.rec, r.time)
