@@ -6,8 +6,8 @@ Renders two weather scenarios (config2-setdown and config1-procedure1, fog 50 %,
 camera's frames in order, single-threaded (cv2.setNumThreads(1)), timing CPU time per frame. The
 accuracy columns compare the corners with the simulator's true corners (truth_frames.csv).
 
-    .venv/bin/python benchmarks/detection_speed.py               # writes benchmarks/results/detection_speed.md
-    .venv/bin/python benchmarks/detection_speed.py --quick       # 4 s clips, one repeat, prints only
+    .venv/bin/python -m benchmarks.detection_speed               # writes benchmarks/results/detection_speed.md
+    .venv/bin/python -m benchmarks.detection_speed --quick       # 4 s clips, one repeat, prints only
 
 Renders are cached in benchmarks/.cache/ (delete it to re-render).
 """
@@ -32,6 +32,7 @@ import pandas as pd
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from benchmarks.scenes import render_scene  # noqa: E402
 from tracking.camera import CameraModel, load_camera  # noqa: E402
 from tracking.detection import Detections, MarkerDetection, MarkerDetector  # noqa: E402
 from tracking.images import video_frames  # noqa: E402
@@ -39,14 +40,11 @@ from tracking.marker_tracker import MarkerTracker  # noqa: E402
 from tracking.pose import estimate_pose  # noqa: E402
 from tracking.rig import Rig, load_rig  # noqa: E402
 
-CACHE = REPO / "benchmarks" / ".cache"
 RESULTS = REPO / "benchmarks" / "results" / "detection_speed.md"
 SCENARIOS = ("config2-setdown-weather", "config1-procedure1-weather")
-FPS = 15.0
 SECONDS = {"920x600": 20.0, "1920x1080": 12.0}
 QUICK_SECONDS = 4.0
-HD = (1920, 1080)
-HD_SCALE = 1080 / 600  # focal length and principal point scale of the 1920x1080 cameras
+SIZES = {"920x600": (920, 600), "1920x1080": (1920, 1080)}  # scenes: benchmarks/scenes.py
 WRONG_SIDES = 0.5  # a detection whose centre is this many sides from its id's true centre has a wrong id
 BAD_CORNER_PX = 1.0
 METHODS = ("OpenCV default", "today (MarkerDetector)", "MarkerTracker")
@@ -82,30 +80,6 @@ class Stats:
     corners: int = 0
     bad: int = 0  # markers with a corner more than BAD_CORNER_PX off
     full_searches: int = 0
-
-
-def render(name: str, size: str, seconds: float) -> Path:
-    """Render a scenario at 15 FPS and the given size into the cache (once)."""
-    from tracking.sim.command import render_scenario
-    from tracking.sim.scenario import load_scenario
-
-    out = CACHE / f"speed-{name}-{size}-{seconds:g}s"
-    if (out / "truth_frames.csv").is_file():
-        return out
-    sc = load_scenario(name)
-    cams = []
-    for c in sc.cameras:
-        update: dict = {"fps": FPS}
-        if size != "920x600":
-            fx, fy, cx, cy = c.K
-            update.update(width=HD[0], height=HD[1], K=[fx * HD_SCALE, fy * HD_SCALE,
-                                                        cx * HD_SCALE + (HD[0] - c.width * HD_SCALE) / 2,
-                                                        cy * HD_SCALE])
-        cams.append(c.model_copy(update=update))
-    sc = sc.model_copy(update={"cameras": cams})
-    out.mkdir(parents=True, exist_ok=True)
-    render_scenario(sc, out, seconds, quiet=True)
-    return out
 
 
 def opencv_default(rig: Rig, camera: CameraModel) -> Callable[[np.ndarray], Detections]:
@@ -190,7 +164,7 @@ def benchmark(size: str, seconds: float, repeats: int) -> dict[str, Stats]:
     stats = {m: Stats(cpu_ms=[0.0] * repeats, pose_ms=[0.0] * repeats, frame_ms=[[] for _ in range(repeats)])
              for m in METHODS}
     for name in SCENARIOS:
-        folder = render(name, size, seconds)
+        folder = render_scene(name, SIZES[size], seconds)
         rig = load_rig(folder / "rig.yaml")
         truth = truth_by_frame(folder)
         for entry in rig.cameras:

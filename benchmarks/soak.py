@@ -18,7 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.throughput import CACHE, render, streams_rig
+from benchmarks.scenes import CACHE, render_scene
+from benchmarks.throughput import SCENARIO, streams_rig
 from tracking.live import LiveTracker
 from tracking.rig import load_rig
 from viewer.session import Recorder
@@ -47,7 +48,7 @@ def main() -> None:
     parser.add_argument("--hours", type=float, default=6.0)
     parser.add_argument("--cameras", type=int, default=4)
     args = parser.parse_args()
-    scene = render((920, 600), CLIP_S)
+    scene = render_scene(SCENARIO, (920, 600), CLIP_S)
     samples: list[tuple[float, float, float, float]] = []  # capture minute, wall s, main MB, workers MB
     frames = 0
     with tempfile.TemporaryDirectory(dir=CACHE) as tmp:

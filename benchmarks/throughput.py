@@ -8,8 +8,8 @@ Recorder writing the .rrd, twice:
     but skipped to keep up. Real time for N streams means 100 % searched.
 Beside it, in the same run, plain OpenCV: decode and `detectMarkers` with default parameters, one stream, one core.
 
-Run: .venv/bin/python benchmarks/throughput.py [--streams 1 4 8] [--seconds 10]
-Results: benchmarks/results/throughput.md (renders cached in benchmarks/.cache/).
+Run: .venv/bin/python -m benchmarks.throughput [--streams 1 4 8] [--seconds 10]
+Results: benchmarks/results/throughput.md (scenes: benchmarks/scenes.py).
 """
 
 from __future__ import annotations
@@ -25,37 +25,16 @@ from pathlib import Path
 import cv2
 import yaml
 
+from benchmarks.scenes import FPS, render_scene
 from tracking.images import frames
 from tracking.live import LiveTracker
 from tracking.rig import load_rig
 from viewer.session import Recorder
 
 REPO = Path(__file__).resolve().parents[1]
-CACHE = REPO / "benchmarks" / ".cache"
 RESULTS = REPO / "benchmarks" / "results" / "throughput.md"
 SCENARIO = "config2-setdown-weather"
-FPS = 15.0
 RESOLUTIONS = {"920×600": (920, 600), "1920×1080": (1920, 1080)}
-
-
-def render(size: tuple[int, int], seconds: float) -> Path:
-    """The scenario at one resolution (intrinsics scaled with the image), cached."""
-    from tracking.sim.command import render_scenario
-    from tracking.sim.scenario import load_scenario
-
-    out = CACHE / f"throughput-{size[0]}x{size[1]}-{seconds:g}s"
-    if (out / "rig.yaml").is_file():
-        return out
-    sc = load_scenario(SCENARIO)
-    cams = []
-    for c in sc.cameras:
-        s = size[0] / c.width  # same pixel pitch scaling on both axes; the height is cropped or extended
-        K = [c.K[0] * s, c.K[1] * s, c.K[2] * s, c.K[3] * s - (c.height * s - size[1]) / 2]
-        cams.append(c.model_copy(update={"fps": FPS, "width": size[0], "height": size[1], "K": K}))
-    sc = sc.model_copy(update={"cameras": cams})
-    out.mkdir(parents=True, exist_ok=True)
-    render_scenario(sc, out, seconds, quiet=True)
-    return out
 
 
 def streams_rig(scene: Path, n: int, work: Path) -> Path:
@@ -111,7 +90,7 @@ def main() -> None:
     args = parser.parse_args()
     rows = []
     for label in args.resolutions:
-        scene = render(RESOLUTIONS[label], args.seconds)
+        scene = render_scene(SCENARIO, RESOLUTIONS[label], args.seconds)
         plain = plain_opencv(scene)
         print(f"{label}: plain OpenCV detectMarkers {plain:.1f} frames/s (one core)", flush=True)
         for n in args.streams:

@@ -24,6 +24,9 @@ if TYPE_CHECKING:
     from tracking.rig import Rig
     from viewer.archive import ArchiveSink
 
+if TYPE_CHECKING:
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
 app = typer.Typer(
     name="topside",
     help="Watch an offshore topside being set down on its jacket, from cameras.",
@@ -33,6 +36,25 @@ app = typer.Typer(
 )
 err_console = Console(stderr=True, highlight=False, soft_wrap=True)
 console = Console(highlight=False)
+
+
+# Options shared by `track --mcap` and `export`.
+KeyOption = Annotated[Path | None, typer.Option(help="ed25519 private key (PEM) to sign the archive.")]
+VesselOption = Annotated[str, typer.Option(help="Crane vessel, for the archive's metadata.")]
+OperatorOption = Annotated[str, typer.Option(help="Operator, for the archive's metadata.")]
+VideoOption = Annotated[str, typer.Option(help="Frames that have no H.264 of their own (stills, raw sources): jpeg "
+                                               "(CompressedImage) or h264 (re-encoded, CompressedVideo). The "
+                                               "cameras' own H.264 always passes through.")]
+
+
+def _archive_options(key: Path | None, video: str) -> Ed25519PrivateKey | None:
+    """The signing key (read before any work starts) after checking the frame format."""
+    from viewer.archive import VIDEO_FORMATS
+    from viewer.manifest import load_private_key
+
+    if video not in VIDEO_FORMATS:
+        raise InputError("--video", f"{video!r} is not a frame format (expected {' or '.join(VIDEO_FORMATS)})")
+    return load_private_key(key) if key is not None else None
 
 
 def _progress() -> Progress:
@@ -168,11 +190,10 @@ def track(
     rejected: Annotated[bool, typer.Option("--rejected", help="Record rejected marker candidates too.")] = False,
     mcap: Annotated[Path | None, typer.Option(help="Also write an MCAP audit archive (opens in Foxglove, Rerun).")
                     ] = None,
-    key: Annotated[Path | None, typer.Option(help="ed25519 private key (PEM) to sign the archive.")] = None,
-    vessel: Annotated[str, typer.Option(help="Crane vessel, for the archive's metadata.")] = "",
-    operator: Annotated[str, typer.Option(help="Operator, for the archive's metadata.")] = "",
-    video: Annotated[str, typer.Option(help="Archive frames as jpeg (CompressedImage) or h264 (CompressedVideo).")
-                     ] = "jpeg",
+    key: KeyOption = None,
+    vessel: VesselOption = "",
+    operator: OperatorOption = "",
+    video: VideoOption = "jpeg",
 ) -> None:
     """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording."""
     from rich.table import Table
@@ -243,13 +264,10 @@ def track(
 
 def _archive_sink(rig: Rig, path: Path, options: dict[str, str], truth_df: pd.DataFrame | None, key: Path | None,
                   offsets_csv: Path | None, vessel: str, operator: str, video: str) -> ArchiveSink:
-    """The MCAP archive writer for `track --mcap` (and its signing key, read before any work starts)."""
-    from viewer.archive import VIDEO_FORMATS, ArchiveSink
-    from viewer.manifest import load_private_key
+    """The MCAP archive writer for `track --mcap`."""
+    from viewer.archive import ArchiveSink
 
-    if video not in VIDEO_FORMATS:
-        raise InputError("--video", f"{video!r} is not a frame format (expected {' or '.join(VIDEO_FORMATS)})")
-    private = load_private_key(key) if key is not None else None
+    private = _archive_options(key, video)
     return ArchiveSink(rig, path, options, {"vessel": vessel, "operator": operator}, truth_df, private, offsets_csv,
                        video=video)
 
@@ -259,20 +277,15 @@ def export(
     recording: Annotated[Path, typer.Argument(help="A recording (.rrd) written by `topside track --rrd`.")],
     mcap: Annotated[Path, typer.Option(help="MCAP archive to write.")],
     offsets: Annotated[Path | None, typer.Option(help="Offsets CSV of the same run, to attach.")] = None,
-    key: Annotated[Path | None, typer.Option(help="ed25519 private key (PEM) to sign the archive.")] = None,
-    vessel: Annotated[str, typer.Option(help="Crane vessel, for the archive's metadata.")] = "",
-    operator: Annotated[str, typer.Option(help="Operator, for the archive's metadata.")] = "",
-    video: Annotated[str, typer.Option(help="Archive frames as jpeg (CompressedImage) or h264 (CompressedVideo).")
-                     ] = "jpeg",
+    key: KeyOption = None,
+    vessel: VesselOption = "",
+    operator: OperatorOption = "",
+    video: VideoOption = "jpeg",
 ) -> None:
     """Write the MCAP audit archive of a recording: the same content `track --mcap` writes."""
-    from viewer.archive import VIDEO_FORMATS
     from viewer.export import export_recording
-    from viewer.manifest import load_private_key
 
-    if video not in VIDEO_FORMATS:
-        raise InputError("--video", f"{video!r} is not a frame format (expected {' or '.join(VIDEO_FORMATS)})")
-    private = load_private_key(key) if key is not None else None
+    private = _archive_options(key, video)
     if offsets is not None and not offsets.is_file():
         raise InputError(offsets, "offsets CSV not found", "--offsets")
     n = export_recording(recording, mcap, {"vessel": vessel, "operator": operator}, private,
@@ -387,17 +400,17 @@ def live(
         console.print(f"web viewer: http://{bind}:9090/?url={viewer_url}")
     recorder = Recorder(the_rig, rrd, viewer=viewer_url, segment_s=segment_minutes * 60, stale_s=stale, layout=layout,
                         estimate_period_s=LIVE_ESTIMATE_PERIOD_S)
-    start: list[float] = []
 
     def estimates(tracker: LiveTracker):
+        start = None  # capture time of the first frame
         for update in tracker.updates():
             recorder.on_update(update)
             for event in update.events:
                 err_console.print(f"{event.camera}: {event.state}" + (f" ({event.detail})" if event.detail else ""))
             yield from update.estimates
             if update.results:
-                start.append(update.results[0].time) if not start else None
-                if duration is not None and update.results[-1].time - start[0] >= duration:
+                start = update.results[0].time if start is None else start
+                if duration is not None and update.results[-1].time - start >= duration:
                     return
 
     n_rows = 0

@@ -582,11 +582,16 @@ def fused_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Filte
     """Live: after each frame with measurements, the filtered offset at every cone."""
     kf = TopsideFilter(rig, tuning or FilterTuning())
     for group in _frames(measurements):
-        kf.predict(group[0].time)
-        for m in group:
-            kf.update(m)
-        if kf.last_accepted:  # once anything was accepted, every frame gives an estimate
-            yield from kf.cone_estimates()
+        yield from filter_frame(kf, group)
+
+
+def filter_frame(kf: TopsideFilter, group: list[Measurement]) -> list[ConeEstimate]:
+    """One camera frame's measurements applied at its capture time; the estimate at every cone after it
+    (none until something was accepted; from then on, every frame gives one)."""
+    kf.predict(group[0].time)
+    for m in preferred(group):
+        kf.update(m)
+    return kf.cone_estimates() if kf.last_accepted else []
 
 
 def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: FilterTuning | None = None

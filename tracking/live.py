@@ -21,7 +21,7 @@ import cv2
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
 from tracking.filtering import ConeEstimate
-from tracking.fusion import FilterTuning, TopsideFilter, preferred
+from tracking.fusion import FilterTuning, TopsideFilter, filter_frame
 from tracking.pipeline import CameraTracker, FrameResult
 from tracking.rig import Rig, load_rig
 from tracking.sources import (
@@ -181,7 +181,7 @@ class LiveTracker:
             return 0.0
         if not self.speed < float("inf"):
             return self._newest  # as fast as possible: the newest frame is "now"
-        return self._origin.value + (time.time() - self._t0.value) * self.speed
+        return Pacer(self._t0.value, self.speed, self._origin.value).now()  # the workers' clock
 
     def _drain(self, timeout: float) -> list[object]:
         """Messages from the workers, waiting up to timeout for the first."""
@@ -245,12 +245,8 @@ class LiveTracker:
             if not result.tracked:
                 continue
             measurements = [*result.offsets, *([result.observation] if result.observation is not None else [])]
-            if measurements:  # the same steps as fusion.fused_estimates
-                self.kf.predict(t)
-                for m in preferred(measurements):
-                    self.kf.update(m)
-                if self.kf.last_accepted:
-                    update.estimates.extend(self.kf.cone_estimates())
+            if measurements:
+                update.estimates.extend(filter_frame(self.kf, measurements))
 
     def _check_lost(self, wall: float, update: LiveUpdate) -> None:
         """A live camera silent for LOST_AFTER_S is lost (a hung stream sends no event)."""

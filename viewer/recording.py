@@ -279,11 +279,16 @@ def log_series_styles(rec: rr.RecordingStream, cones: Iterable[str], with_truth:
                                                                       widths=1.0), static=True, recording=rec)
 
 
+def concentricity(offset: np.ndarray) -> float:
+    """Horizontal distance of a cone from its target, m: what the tolerance applies to (Δz is the approach)."""
+    return float(np.hypot(offset[0], offset[1]))
+
+
 def cone_state(offset: np.ndarray) -> str:
     """'NO DATA' unless every axis is known; then within or outside the concentricity tolerance."""
     if not np.all(np.isfinite(offset)):
         return "NO DATA"
-    return f"within ±{TOLERANCE_M} m" if np.all(np.abs(offset) <= TOLERANCE_M) else "outside"
+    return f"within ±{TOLERANCE_M} m" if concentricity(offset) <= TOLERANCE_M else "outside"
 
 
 @dataclass

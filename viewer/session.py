@@ -7,6 +7,7 @@ import os
 import subprocess
 from collections import Counter
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ import rerun as rr
 from tracking.camera import CameraModel, load_camera
 from tracking.evaluate import truth_at
 from tracking.filtering import ConeEstimate
+from tracking.images import Frame
 from tracking.live import STALE_S, LiveUpdate
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
@@ -118,7 +120,7 @@ class Recorder:
         self._last_time = 0.0
         self._last_capture: dict[str, float] = {}
         self._video: set[str] = set()  # cameras whose codec is declared
-        self._gop: dict[str, list[FrameResult]] = {}  # frames since each camera's newest keyframe
+        self._gop: dict[str, list[Frame]] = {}  # segmented: packets since each camera's newest keyframe
         self._viewer = viewer
         self._rrd = Path(rrd) if rrd is not None else None
         self._segment_s = segment_s
@@ -176,11 +178,11 @@ class Recorder:
             self._compactor.start(closed)
         if self._last_update is not None:  # every segment opens with the superintendent's figures
             self._log_board(self._last_update)
-        for results in self._gop.values():  # the frames a decoder needs before the next keyframe
-            for r in results:
-                set_capture_time(self.rec, r.time)
-                rr.set_time(f"frame_{r.camera}", sequence=r.frame.index, recording=self.rec)
-                log_image(self.rec, f"world/cameras/{r.camera}/image", r.frame, self.jpeg_quality)
+        for camera, frames in self._gop.items():  # the frames a decoder needs before the next keyframe
+            for frame in frames:
+                set_capture_time(self.rec, frame.time)
+                rr.set_time(f"frame_{camera}", sequence=frame.index, recording=self.rec)
+                log_image(self.rec, f"world/cameras/{camera}/image", frame, self.jpeg_quality)
         self._write_index()
 
     def _write_index(self) -> None:
@@ -203,14 +205,14 @@ class Recorder:
         """Log one processed frame."""
         self._rotate_if_due(result.time)
         self._note_time(result.time)
-        if result.frame.packet is not None:
-            if result.camera not in self._video:
-                log_video_codec(self.rec, result.camera)
-                self._video.add(result.camera)
+        if result.frame.packet is not None and result.camera not in self._video:
+            log_video_codec(self.rec, result.camera)
+            self._video.add(result.camera)
+        if result.frame.packet is not None and self._segment_s:
             gop = self._gop.setdefault(result.camera, [])
             if result.frame.keyframe:
                 gop.clear()
-            gop.append(result)
+            gop.append(replace(result.frame, gray=None, bgr=None))  # the packet is all a segment needs
         log_frame(self.rec, self.rig, self.cameras[result.camera], result, self.show_rejected, self.jpeg_quality)
         self.status.frames[result.camera] = self.status.frames.get(result.camera, 0) + 1
         self.status.markers[result.camera] = self.status.markers.get(result.camera, 0) + len(result.poses)

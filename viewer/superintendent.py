@@ -21,7 +21,7 @@ from tracking.filtering import ConeEstimate
 from tracking.live import STALE_S, CameraHealth
 from tracking.rig import Rig
 from tracking.sources import CameraState
-from viewer.recording import TOLERANCE_M, set_capture_time
+from viewer.recording import TOLERANCE_M, concentricity, set_capture_time
 
 ROOT = "superintendent"
 CONFIDENCE_SIGMAS = 2.0  # amber when the offset is inside the tolerance but its 2σ bound is not
@@ -67,7 +67,7 @@ def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_meas
         offset = np.full(3, np.nan) if estimate is None else estimate.offset
         return ConeReading(cone, ConeState.NO_DATA, np.nan, np.nan, offset, age, ())
     dx, dy = estimate.offset[:2]
-    r = float(np.hypot(dx, dy))
+    r = concentricity(estimate.offset)
     cov = estimate.covariance[:2, :2] if estimate.covariance is not None else np.zeros((2, 2))
     u = np.array([dx, dy]) / r if r > 0 else np.array([1.0, 0.0])
     sigma = float(np.sqrt(max(u @ cov @ u, 0.0)))

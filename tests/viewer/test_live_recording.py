@@ -66,12 +66,11 @@ def test_texts_have_only_glyphs_the_viewer_can_draw(live_run: Path) -> None:
     for state in (estimate([0.03, 0.04, 1.0]), estimate([0.12, 0.1, 0.0]), None):
         assert viewer_safe(cone_markdown(cone_reading(state, "A", 10.1, 10.05)))
     assert viewer_safe(cameras_markdown({s: CameraHealth(s, s, "detail") for s in CameraState}, 10.0))
+    texts = ("TextDocument:text", "Boxes3D:labels", "LineStrips2D:labels", "Points2D:labels", "SeriesLines:names")
     for name in pd.read_csv(live_run / "live.segments.csv")["file"]:
         for path, chunks in chunks_by_entity(live_run / name).items():
-            for c in (c for c in ("TextDocument:text", "Boxes3D:labels", "LineStrips2D:labels", "Points2D:labels",
-                                  "SeriesLines:names") if path):
-                for _, rows in [component_rows(chunks, c)]:
-                    assert all(viewer_safe(str(v)) for v in rows), path
+            for component in texts:
+                assert all(viewer_safe(str(v)) for v in component_rows(chunks, component)[1]), path
 
 
 def test_cone_states() -> None:

@@ -141,6 +141,8 @@ def test_cone_state_never_claims_an_unknown_cone() -> None:
     assert cone_state(np.array([0.01, np.nan, 0.0])) == "NO DATA"  # the paper's mode before camera 2 reports
     assert cone_state(np.array([0.01, -0.02, 0.1])) == "within ±0.15 m"
     assert cone_state(np.array([0.01, -0.2, 0.1])) == "outside"
+    assert cone_state(np.array([0.12, -0.12, 0.0])) == "outside"  # 0.17 m from the target, though each axis fits
+    assert cone_state(np.array([0.01, -0.02, 2.0])) == "within ±0.15 m"  # 2 m above: concentric, not yet down
 
 
 def test_fused_recording_logs_uncertainty(installation: Path, tmp_path: Path) -> None:
