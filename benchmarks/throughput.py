@@ -4,8 +4,8 @@ Streams are the cameras of a simulated set-down in fog and rain at 15 FPS (repea
 1920×1080. Each configuration runs through `tracking.live.LiveTracker` with a worker process per camera and a
 Recorder writing the .rrd, twice:
   - flat out (files replayed as fast as they decode): frames/s over all streams, after start-up;
-  - in real time (each file at its own 15 FPS): the share of frames searched for markers; the rest were recorded
-    but skipped to keep up. Real time for N streams means 100 % searched.
+  - in real time (each file at its own 15 FPS): the share of frames used, searched by their worker and fused by
+    the main process; the rest were recorded but skipped to keep up. Real time for N streams means 100 % used.
 Beside it, in the same run, plain OpenCV: decode and `detectMarkers` with default parameters, one stream, one core.
 
 Run: .venv/bin/python -m benchmarks.throughput [--streams 1 4 8] [--seconds 10]
@@ -50,10 +50,10 @@ def streams_rig(scene: Path, n: int, work: Path) -> Path:
 
 
 def run_live(rig_path: Path, speed: float, work: Path) -> dict:
-    """One live run with recording: frames, searched share, frames/s after the first frame."""
+    """One live run with recording: frames, share used, frames/s after the first frame."""
     rig = load_rig(rig_path)
     recorder = Recorder(rig, work / f"run-{len(rig.cameras)}-{speed}.rrd")
-    n = searched = 0
+    n = used = 0
     t_first = t_last = None
     with LiveTracker(rig, speed=speed) as tracker:
         for update in tracker.updates():
@@ -62,10 +62,10 @@ def run_live(rig_path: Path, speed: float, work: Path) -> dict:
                 t_first = t_first or time.perf_counter()
                 t_last = time.perf_counter()
                 n += len(update.results)
-                searched += sum(r.tracked for r in update.results)
+                used += sum(r.tracked for r in update.results)
     recorder.close()
     wall = (t_last - t_first) if t_first and t_last and t_last > t_first else math.nan
-    return {"frames": n, "searched": searched / max(n, 1), "fps": n / wall, "rrd_mb": sum(
+    return {"frames": n, "used": used / max(n, 1), "fps": n / wall, "rrd_mb": sum(
         f.stat().st_size for f in work.glob(f"run-{len(rig.cameras)}-{speed}*.rrd")) / 1e6}
 
 
@@ -100,10 +100,10 @@ def main() -> None:
                 flat = run_live(rig, math.inf, work)
                 real = run_live(rig, 1.0, work)
             gb_per_camera_hour = flat["rrd_mb"] / n / args.seconds * 3600 / 1000
-            row = (label, n, flat["fps"], flat["fps"] / plain, real["searched"], gb_per_camera_hour)
+            row = (label, n, flat["fps"], flat["fps"] / plain, real["used"], gb_per_camera_hour)
             rows.append(row)
             print(f"{label} {n} streams: {flat['fps']:.1f} frames/s flat out ({row[3]:.1f}× plain), "
-                  f"real time {real['searched']:.0%} searched", flush=True)
+                  f"real time {real['used']:.0%} used", flush=True)
         rows.append((label, "plain", plain, 1.0, math.nan, math.nan))
     write(rows, args)
 
@@ -115,15 +115,15 @@ def write(rows: list[tuple], args: argparse.Namespace) -> None:
              f"{os.cpu_count()} cores ({platform.processor() or platform.machine()}), "
              f"python {platform.python_version()}. End to end: decode, detection, poses, fusion, and the Rerun "
              "recording (the cameras' H.264 passed through). Flat out: files as fast as they decode. Real time: "
-             "files at 15 FPS each; frames the workers could not search in time are recorded but not searched.", "",
-             "| resolution | streams | frames/s flat out | × plain OpenCV | searched in real time "
+             "files at 15 FPS each; frames that could not be searched and fused in time are recorded only.", "",
+             "| resolution | streams | frames/s flat out | × plain OpenCV | used in real time "
              "| GB per camera-hour |",
              "|---|---:|---:|---:|---:|---:|"]
-    for label, n, fps, ratio, searched, gb in rows:
+    for label, n, fps, ratio, used, gb in rows:
         if n == "plain":
             lines.append(f"| {label} | plain `detectMarkers`, 1 stream | {fps:.1f} | 1.0 | — | — |")
         else:
-            lines.append(f"| {label} | {n} | {fps:.1f} | {ratio:.1f} | {searched:.0%} | {gb:.2f} |")
+            lines.append(f"| {label} | {n} | {fps:.1f} | {ratio:.1f} | {used:.0%} | {gb:.2f} |")
     RESULTS.write_text("\n".join(lines) + "\n")
     print(f"wrote {RESULTS}")
 

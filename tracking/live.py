@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import heapq
 import multiprocessing as mp
+import os
 import queue
 import time
 from collections.abc import Iterator
@@ -40,7 +41,8 @@ REORDER_S = 0.15  # longest wait for a slower camera before a frame is fused out
 LOST_AFTER_S = 1.0  # wall-clock seconds without a frame before a camera counts as lost
 RECONNECT_S = 2.0  # wait between attempts to reopen a lost device or stream
 STALE_S = 0.5  # an estimate whose newest measurement is older than this is shown as NO DATA
-LATE_S = 0.25  # a frame this far behind the live clock is recorded but not searched, so the worker catches up
+LATE_S = 0.1  # a frame this far behind the live clock is recorded but not searched, so the worker catches up
+WORKER_NICE = 5  # workers yield the cores to the main process, which then never falls behind them
 QUEUE_FRAMES = 64  # frames a worker may have in flight; in real time, newer frames replace what does not fit
 START_DELAY_S = 0.5  # replay starts this long after every worker is ready
 EMA = 0.1  # smoothing of the frame-rate estimate
@@ -79,6 +81,8 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
     rig = load_rig(rig_path)
     entry = next(c for c in rig.cameras if c.name == name)
     cv2.setNumThreads(1)  # one process per camera already uses every core
+    if hasattr(os, "nice"):
+        os.nice(WORKER_NICE)  # when the cores are short, the main process (fusion, the live view) goes first
     tracker = CameraTracker.from_rig(rig, entry, refinement, packets=True, roi_tracking=True)
     out.put(SourceEvent(name, CameraState.STARTING, time.time(), "ready", first_capture_time(rig, entry)))
     while t0.value == 0.0 and not stop.is_set():
@@ -238,8 +242,8 @@ class LiveTracker:
         while self._pending and (flush or self._pending[0][0] <= mark or wall - self._pending[0][3] >= self.reorder_s):
             t, _, result, _ = heapq.heappop(self._pending)
             self._newest = max(self._newest, t)
-            if self.realtime and result.tracked and self.now() - t > LATE_S:  # the main process is behind:
-                result = replace(result, tracked=False)  # record the frame, skip its fusion, catch up
+            if self.realtime and result.tracked and self.now() - t > STALE_S:  # too old to show: the main process
+                result = replace(result, tracked=False)  # is behind; record the frame, skip its fusion, catch up
                 self.health[result.camera].skipped += 1
             update.results.append(result)
             if not result.tracked:
