@@ -77,7 +77,17 @@ class LiveUpdate:
 
 def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: mp.Value, origin: mp.Value,
                   speed: float, refinement: Refinement, realtime: bool, loop_until: float | None = None) -> None:
-    """Process entry: track one camera until its source ends or stop is set; reconnect lost live sources."""
+    """Process entry: track one camera until its source ends, stop is set or the main process is gone; reconnect
+    lost live sources."""
+    parent = mp.parent_process()
+
+    def done() -> bool:
+        """Stop asked for, or the main process died without asking (killed): an orphan must not run on."""
+        if parent is not None and not parent.is_alive():
+            out.cancel_join_thread()  # nobody reads the queue any more: exit without waiting to flush it
+            return True
+        return stop.is_set()
+
     rig = load_rig(rig_path)
     entry = next(c for c in rig.cameras if c.name == name)
     cv2.setNumThreads(1)  # one process per camera already uses every core
@@ -85,7 +95,7 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
         os.nice(WORKER_NICE)  # when the cores are short, the main process (fusion, the live view) goes first
     tracker = CameraTracker.from_rig(rig, entry, refinement, packets=True, roi_tracking=True)
     out.put(SourceEvent(name, CameraState.STARTING, time.time(), "ready", first_capture_time(rig, entry)))
-    while t0.value == 0.0 and not stop.is_set():
+    while t0.value == 0.0 and not done():
         time.sleep(0.01)
     pacer = Pacer(t0.value, speed, origin.value)
     live_source = source_kind(entry.source) != SourceKind.FILE
@@ -94,12 +104,12 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
         """How far a frame's capture time is behind the live clock, s."""
         return (time.time() + entry.time_offset - t) if live_source else pacer.now() - t
 
-    while not stop.is_set():
+    while not done():
         freeze = FreezeDetector()
         state = CameraState.STARTING
         try:
             for frame in camera_frames(rig, entry, pacer, loop_until):
-                if stop.is_set():
+                if done():
                     return
                 frozen = freeze.frozen(frame)
                 if frozen != (state == CameraState.FROZEN) or state == CameraState.STARTING:

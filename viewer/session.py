@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import rerun as rr
+import rerun.blueprint as rrb
 
 from tracking.camera import CameraModel, load_camera
 from tracking.evaluate import truth_at
@@ -57,6 +58,8 @@ FLUSH_S = 0.5  # estimates are sent in columns covering this much capture time (
 AGES_PERIOD_S = 0.2  # camera frame ages are logged this often
 BOARD_PERIOD_S = 0.2  # the superintendent's figures refresh this often (capture time)
 BLUEPRINT_MIN_PERIOD_S = 30.0  # a changed camera-per-cone choice re-sends the live layout at most this often
+BACKLOG_PERIOD_S = 2.0  # every this much capture time the logger waits for its sinks (memory stays bounded)
+BACKLOG_TIMEOUT_S = 0.5  # ... but at most this long: a slow viewer must not stall the live loop
 
 
 class Compactor:
@@ -68,11 +71,12 @@ class Compactor:
     def __init__(self) -> None:
         self.running: list[tuple[subprocess.Popen, Path, Path]] = []
 
-    def start(self, path: Path) -> None:
-        """Compact one closed file."""
+    def start(self, path: Path, layout: Path | None = None) -> None:
+        """Compact one closed file; with a layout (.rbl), that blueprint is merged into it."""
         tmp = path.with_name(path.name + ".compacting")
-        proc = subprocess.Popen(["nice", "-n", "10", rerun_binary(), "rrd", "optimize", str(path), "-o", str(tmp)],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        inputs = [str(layout)] if layout is not None and layout.is_file() else []
+        proc = subprocess.Popen(["nice", "-n", "10", rerun_binary(), "rrd", "optimize", *inputs, str(path),
+                                 "-o", str(tmp)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         self.running.append((proc, path, tmp))
 
     def poll(self, wait: bool = False) -> None:
@@ -93,7 +97,7 @@ class Recorder:
     """Logs frames and estimates of one tracked installation into a Rerun recording.
 
     rrd: file to write; with segment_s, a new file <stem>-NNN.rrd every segment_s of capture time, listed in
-    <stem>.segments.csv. viewer: gRPC URL of a viewer to stream to as well (live).
+    <stem>.segments.csv, with the layout in <stem>.rbl. viewer: gRPC URL of a viewer to stream to as well (live).
     """
 
     def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
@@ -133,9 +137,20 @@ class Recorder:
         self._last_update: LiveUpdate | None = None
         self._estimates: list[ConeEstimate] = []  # not yet sent
         self._ages_logged = -np.inf
+        self._drained = -np.inf
+        self.backlog_timeouts = 0  # waits for the sinks that ran out of time
+        self._layout: Path | None = None  # segmented: the stored blueprint, merged into each segment when compacted
         if self._rrd is not None:
             self._rrd.parent.mkdir(parents=True, exist_ok=True)
+            if segment_s:
+                self._layout = self._rrd.with_name(f"{self._rrd.stem}.rbl")
+                self._stored_blueprint().save(APP_ID, self._layout)
         self._open(self._segment_path(0) if segment_s else self._rrd)
+
+    def _stored_blueprint(self) -> rrb.Blueprint:
+        """The layout a file opens with."""
+        return (superintendent_blueprint(self.rig, self.cone_cameras()) if self.layout == "superintendent"
+                else analysis_blueprint(self.rig, self.truth is not None))
 
     def _segment_path(self, index: int) -> Path | None:
         """File of the index-th segment."""
@@ -143,13 +158,17 @@ class Recorder:
 
     def _open(self, path: Path | None) -> None:
         """Attach the sinks (a file and/or a viewer) and log everything static."""
-        sinks: list = [rr.FileSink(path)] if path is not None else []
+        # A footer indexes every chunk, held in memory until the file closes (~5 kB a chunk, ~140 chunks/s live):
+        # segments are written without one, and the compactor (`rerun rrd optimize`) adds it once closed.
+        sinks: list = [rr.FileSink(path, write_footer=not self._segment_s)] if path is not None else []
         if self._viewer is not None:
             sinks.append(rr.GrpcSink(self._viewer))
         if sinks:
-            blueprint = (superintendent_blueprint(self.rig, self.cone_cameras()) if self.layout == "superintendent"
-                         else analysis_blueprint(self.rig, self.truth is not None))
-            self.rec.set_sinks(*sinks, default_blueprint=blueprint)
+            # rerun-sdk 0.41 never frees the stream a blueprint is built in (~0.7-2.4 MB each): over six hours of
+            # 1-minute segments that is the main process's whole growth. Only the first segment gets it here; the
+            # others get the saved layout (.rbl) when compacted, and a live viewer keeps the one it has.
+            first = not self._segments
+            self.rec.set_sinks(*sinks, default_blueprint=self._stored_blueprint() if first else None)
         if path is not None:
             self._segments.append([path.name, None, None])
         log_rig(self.rec, self.rig)
@@ -175,7 +194,7 @@ class Recorder:
         closed = self._segment_path(len(self._segments) - 1)
         self._open(self._segment_path(len(self._segments)))
         if closed is not None:
-            self._compactor.start(closed)
+            self._compactor.start(closed, self._layout if len(self._segments) > 2 else None)
         if self._last_update is not None:  # every segment opens with the superintendent's figures
             self._log_board(self._last_update)
         for camera, frames in self._gop.items():  # the frames a decoder needs before the next keyframe
@@ -225,6 +244,17 @@ class Recorder:
             log_health(self.rec, result)
         for m in result.offsets:
             self._measured[(m.cone, m.camera)] += 1
+        if result.time - self._drained >= BACKLOG_PERIOD_S:
+            self._drain()
+            self._drained = result.time
+
+    def _drain(self) -> None:
+        """Wait (bounded) until the sinks have taken what was logged: faster than real time, or with the CPU
+        saturated, rerun's writer otherwise falls behind and its queue grows by the whole segment."""
+        try:
+            self.rec.flush(timeout_sec=BACKLOG_TIMEOUT_S)
+        except RuntimeError:  # "Flush timed out": the data stays queued and goes out with the next one
+            self.backlog_timeouts += 1
 
     def on_estimate(self, estimate: ConeEstimate) -> None:
         """Take one cone estimate: sent with the others of its FLUSH_S; the status panel when due."""
@@ -306,5 +336,5 @@ class Recorder:
         self.rec.disconnect()
         last = self._segment_path(len(self._segments) - 1) if self._segment_s else self._rrd
         if last is not None and last.is_file():
-            self._compactor.start(last)
+            self._compactor.start(last, self._layout if len(self._segments) > 1 else None)
         self._compactor.poll(wait=True)

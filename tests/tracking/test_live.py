@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import math
+import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -149,3 +152,43 @@ def test_a_stream_that_ends_is_lost_then_taken_back(http_streams: Path) -> None:
     lost = seen.index(CameraState.LOST)
     assert CameraState.LIVE in seen[:lost] and CameraState.LIVE in seen[lost:]  # taken back after the stream ended
     assert frames >= 2 * FRAMES - 2  # both streams tracked to their ends before the reconnection
+
+
+ORPHAN_SCRIPT = """
+import sys
+from pathlib import Path
+from tracking.live import LiveTracker
+from tracking.rig import load_rig
+if __name__ == "__main__":
+    with LiveTracker(load_rig(Path(sys.argv[1])), speed=1.0, loop_until=600.0) as tracker:
+        for update in tracker.updates():
+            if update.results:
+                print(*[p.pid for p in tracker._workers], flush=True)
+                break
+        for update in tracker.updates():
+            pass
+"""
+
+
+def running(pid: int) -> bool:
+    """The process exists and is not a zombie (an orphan's exit may never be reaped in a container)."""
+    try:
+        return "\\tZ" not in next(line for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+                                  if line.startswith("State:")).replace("State:", "\t")
+    except (OSError, StopIteration):
+        return False
+
+
+def test_workers_end_when_the_main_process_is_killed(installation: Path, tmp_path: Path) -> None:
+    script = tmp_path / "orphan.py"
+    script.write_text(ORPHAN_SCRIPT)
+    main = subprocess.Popen([sys.executable, str(script), str(installation / "rig.yaml")], stdout=subprocess.PIPE,
+                            text=True, cwd=Path(__file__).resolve().parents[2])
+    pids = [int(p) for p in main.stdout.readline().split()]
+    assert len(pids) == 2 and all(running(p) for p in pids)
+    main.send_signal(signal.SIGKILL)  # no clean-up runs: the workers must notice on their own
+    main.wait()
+    deadline = time.monotonic() + 10.0
+    while any(running(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(running(p) for p in pids)

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from rerun.chunk import RrdReader
 
 from tracking.filtering import ConeEstimate
 from viewer.readback import chunks_by_entity, component_rows
@@ -36,6 +37,8 @@ def test_segments_each_open_on_their_own(live_run: Path) -> None:
             _, keys = component_rows(chunks[f"/world/cameras/{cam}/image"], "VideoStream:is_keyframe")
             assert keys and keys[0][0]  # every segment starts its video with a keyframe
         assert "/superintendent/cones/A" in chunks
+        assert RrdReader(live_run / name).blueprints()  # the first as logged, the others merged from live.rbl
+    assert (live_run / "live.rbl").is_file()
 
 
 def test_superintendent_figures_follow_the_csv(live_run: Path) -> None:
