@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import os
 import subprocess
+import sys
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import replace
@@ -60,6 +61,8 @@ BOARD_PERIOD_S = 0.2  # the superintendent's figures refresh this often (capture
 BLUEPRINT_MIN_PERIOD_S = 30.0  # a changed camera-per-cone choice re-sends the live layout at most this often
 BACKLOG_PERIOD_S = 2.0  # every this much capture time the logger waits for its sinks (memory stays bounded)
 BACKLOG_TIMEOUT_S = 0.5  # ... but at most this long: a slow viewer must not stall the live loop
+CLOSE_TIMEOUT_S = 10.0  # at the end, a live viewer is waited for this long at most
+BACKLOG_MAX_PERIOD_S = 60.0  # after timeouts the period doubles up to this (a dead viewer costs < 1 % of the time)
 
 
 class Compactor:
@@ -138,6 +141,7 @@ class Recorder:
         self._estimates: list[ConeEstimate] = []  # not yet sent
         self._ages_logged = -np.inf
         self._drained = -np.inf
+        self._drain_period = BACKLOG_PERIOD_S
         self.backlog_timeouts = 0  # waits for the sinks that ran out of time
         self._layout: Path | None = None  # segmented: the stored blueprint, merged into each segment when compacted
         if self._rrd is not None:
@@ -244,17 +248,20 @@ class Recorder:
             log_health(self.rec, result)
         for m in result.offsets:
             self._measured[(m.cone, m.camera)] += 1
-        if result.time - self._drained >= BACKLOG_PERIOD_S:
+        if result.time - self._drained >= self._drain_period:
             self._drain()
             self._drained = result.time
 
     def _drain(self) -> None:
         """Wait (bounded) until the sinks have taken what was logged: faster than real time, or with the CPU
-        saturated, rerun's writer otherwise falls behind and its queue grows by the whole segment."""
+        saturated, rerun's writer otherwise falls behind and its queue grows by the whole segment. A sink that
+        keeps timing out (a live viewer gone) is waited for ever more rarely, so it cannot slow the tracking."""
         try:
             self.rec.flush(timeout_sec=BACKLOG_TIMEOUT_S)
+            self._drain_period = BACKLOG_PERIOD_S
         except RuntimeError:  # "Flush timed out": the data stays queued and goes out with the next one
             self.backlog_timeouts += 1
+            self._drain_period = min(2 * self._drain_period, BACKLOG_MAX_PERIOD_S)
 
     def on_estimate(self, estimate: ConeEstimate) -> None:
         """Take one cone estimate: sent with the others of its FLUSH_S; the status panel when due."""
@@ -332,7 +339,11 @@ class Recorder:
         if self._last_update is not None:
             self._log_board(self._last_update)
         self._write_index()
-        self.rec.flush()
+        try:
+            self.rec.flush(timeout_sec=CLOSE_TIMEOUT_S if self._viewer else 1e38)
+        except RuntimeError:  # only a live viewer that is gone can time out; the file sink has taken everything
+            print(f"warning: the live viewer at {self._viewer} did not take the last data; the recording is "
+                  "complete", file=sys.stderr)
         self.rec.disconnect()
         last = self._segment_path(len(self._segments) - 1) if self._segment_s else self._rrd
         if last is not None and last.is_file():

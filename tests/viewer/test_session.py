@@ -154,3 +154,27 @@ def test_fused_recording_logs_uncertainty(installation: Path, tmp_path: Path) ->
     _, sd = component_rows(chunks_by_entity(tmp_path / "f.rrd")["/uncertainty/dy/A"], "Scalars:scalars")
     assert len(sd) == len(df)
     np.testing.assert_allclose([v[0] for v in sd], df["sdy"], atol=1e-5)  # the estimator's 1σ, as in the CSV
+
+
+def test_a_viewer_that_is_gone_neither_slows_nor_loses_the_recording(installation: Path, tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from tracking.pipeline import track_rig
+    from tracking.rig import load_rig
+    from viewer.session import BACKLOG_TIMEOUT_S, Recorder
+
+    rig = load_rig(installation / "rig.yaml")
+    results = list(track_rig(rig))
+    span = max(r.time for r in results) - min(r.time for r in results) + 0.1
+    recorder = Recorder(rig, tmp_path / "run.rrd", viewer="rerun+http://127.0.0.1:1/proxy")  # nobody listens
+    laps = int(np.ceil(40.0 / span))  # 40 s of capture: 20 waits for the sinks without the back-off
+    for k in range(laps):
+        for r in results:
+            frame = replace(r.frame, time=r.time + k * span, index=r.frame.index + k * 1000)
+            recorder.on_frame(replace(r, frame=frame))
+    assert 1 <= recorder.backlog_timeouts <= 6  # waits double after each timeout: 0.5 s each, ~5 in 40 s
+    assert recorder.backlog_timeouts * BACKLOG_TIMEOUT_S < 4.0
+    recorder.close()
+    chunks = chunks_by_entity(tmp_path / "run.rrd")
+    times, _ = component_rows(chunks["/world/cameras/cam-port/image"], "EncodedImage:blob")
+    assert len(times) == laps * sum(r.camera == "cam-port" for r in results)  # every frame in the file
