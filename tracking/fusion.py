@@ -51,6 +51,9 @@ MEASUREMENT_FLOOR_M = 0.01  # σ added to every measured position: biases the co
 ROTATION_FLOOR_RAD = 1e-3  # σ added to every measured body rotation, for the same reasons
 REPORT_MAX_SIGMA_M = 0.05  # a cone whose offset σ exceeds this on any axis is reported as unknown (NaN):
 # 3σ must fit in the 150 mm concentricity tolerance for a number to be worth showing
+REPORT_WARMUP_S = 2.0  # for this long after the topside is placed, a cone is reported only when its σ is below
+REPORT_WARMUP_SIGMA_M = 0.025  # this: the first frames leave the cameras' swing about their markers poorly known
+# and not Gaussian, and errors of 3-4σ of a 25-50 mm σ were reported in the first second (accuracy benchmark)
 JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate: edge-fit corners in fog and rain have a median error of 0.1 px
 CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
@@ -338,6 +341,7 @@ class TopsideFilter:
             for cam in self.cameras.values():
                 self._reset_camera(cam)
         self.topside_placed = False
+        self.placed_at: float | None = None  # capture time the topside was (last) placed, or first measured
         geometry = body_geometry(self.rig)
         self.jacket_corners = {i: body_object_points([T], self.rig.marker_size) for i, T in geometry.jacket.items()}
         self.topside_corners = {i: body_object_points([T], self.rig.marker_size)
@@ -493,6 +497,8 @@ class TopsideFilter:
         self._apply(H, y, R)
         self.consecutive_rejects = 0
         self.last_accepted[m.camera] = m.time
+        if self.placed_at is None:
+            self.placed_at = m.time
         return True
 
     def _place_camera(self, cam: CameraState, o: BodyObservation) -> bool:
@@ -556,6 +562,7 @@ class TopsideFilter:
         self.P[:STATE, :STATE] = prior_covariance(self.tuning)
         self.P[:3, :3] = np.eye(3) * TOPSIDE_PLACEMENT_M**2
         self.topside_placed = True
+        self.placed_at = self.time
         return True
 
     def _predict_corners(self, cam: CameraState, marker: int, x: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -657,11 +664,14 @@ class TopsideFilter:
         assert x is not None and P is not None
         time = self.time if time is None else time
         cameras = self.contributing() if cameras is None else cameras
+        limit = REPORT_MAX_SIGMA_M
+        if x is self.x and (self.placed_at is None or time - self.placed_at < REPORT_WARMUP_S):
+            limit = REPORT_WARMUP_SIGMA_M  # the live filter warming up (the smoother has seen it all)
         out = []
         for cone, r in sorted(self.cones.items()):
             H = point_offset_matrix(r)
             cov = H @ P[:STATE, :STATE] @ H.T
-            offset = H @ x[:STATE] if np.sqrt(np.diag(cov)).max() <= REPORT_MAX_SIGMA_M else np.full(3, np.nan)
+            offset = H @ x[:STATE] if np.sqrt(np.diag(cov)).max() <= limit else np.full(3, np.nan)
             out.append(ConeEstimate(time, cone, offset, cameras, cov))
         return out
 

@@ -300,3 +300,22 @@ def test_a_camera_gets_the_process_noise_its_images_show() -> None:
     assert rolling_scale > 10 * still_scale
     assert still_error < 0.5 * drone
     assert np.abs(still_cones).mean() < 0.01 and np.abs(rolling_cones).mean() < 0.01
+
+
+def test_warming_up_the_filter_reports_only_tight_cones() -> None:
+    """For REPORT_WARMUP_S after the topside is placed a cone is shown only with σ ≤ 25 mm, then up to 50 mm."""
+    from tracking.fusion import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_M
+
+    the_rig = camera_rig()
+    kf = TopsideFilter(the_rig)
+    shown = []
+    for o in observations(the_rig, 6.0):
+        kf.predict(o.time)
+        kf.update(o)
+        if kf.placed_at is not None:
+            shown += [(e.time - kf.placed_at, np.sqrt(np.diag(e.covariance)).max())
+                      for e in kf.cone_estimates() if np.isfinite(e.offset).all()]
+    early = [sd for age, sd in shown if age < REPORT_WARMUP_S]
+    late = [sd for age, sd in shown if age >= REPORT_WARMUP_S]
+    assert early and late
+    assert max(early) <= REPORT_WARMUP_SIGMA_M < max(late) <= REPORT_MAX_SIGMA_M
