@@ -3,7 +3,11 @@
 One Kalman filter for the whole installation. Its state holds the topside (12,): translation t and
 small rotation ω of the topside frame in the jacket frame, and their rates; and every camera (12,
 each): its pose in the jacket frame as an error about a nominal T_jacket_camera (rotation δθ, position
-δp) and its rates, with a motion prior from the rig's mount (fixed, vessel, drone).
+δp) and its rates, with a motion prior from the rig's mount (fixed, vessel, drone). A camera's rates
+revert to zero within CAMERA_RATE_TAU_S, and a camera on a rigid mount gets only the process noise its
+own images show: the jacket markers' image motion measures how much it moves (a vessel in calm water,
+barely), so a still camera's pose, and with it the swing about its one far marker that the corners
+hardly see, is averaged over many seconds instead of a fraction of one.
 
 A camera frame is measured by its markers' corners: each marker's four undistorted corners against
 their projection through T_camera_jacket (jacket markers) or T_camera_jacket · T_jacket_topside
@@ -23,7 +27,9 @@ a Rauch-Tung-Striebel pass smooths the run.
 
 from __future__ import annotations
 
+import bisect
 import functools
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
@@ -45,10 +51,24 @@ MEASUREMENT_FLOOR_M = 0.01  # σ added to every measured position: biases the co
 ROTATION_FLOOR_RAD = 1e-3  # σ added to every measured body rotation, for the same reasons
 REPORT_MAX_SIGMA_M = 0.05  # a cone whose offset σ exceeds this on any axis is reported as unknown (NaN):
 # 3σ must fit in the 150 mm concentricity tolerance for a number to be worth showing
+REPORT_WARMUP_S = 2.0  # for this long after the topside is placed, a cone is reported only when its σ is below
+REPORT_WARMUP_SIGMA_M = 0.025  # this: the first frames leave the cameras' swing about their markers poorly known
+# and not Gaussian, and errors of 3-4σ of a 25-50 mm σ were reported in the first second (accuracy benchmark)
 JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate: edge-fit corners in fog and rain have a median error of 0.1 px
 CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
 # (1-4 % of corners are > 1 px off in rain: a heavy tail a Gaussian would follow)
+CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a hovering drone's jitter and a
+# vessel's wave motion turn within a second or two, so a camera never drifts on at the speed it had
+ADAPTIVE_MOTION = True  # cameras on rigid mounts get the process noise their own images show (CameraMotionLevel)
+MOTION_LAG_S = 1.0  # lag of the second differences of jacket-marker image positions that measure a camera's motion
+MOTION_SAMPLES = 60  # second differences (per marker and image axis) whose median gives the camera's motion level
+MOTION_MIN_SAMPLES = 12  # until then the mount's motion prior is used as it stands
+MOTION_UPDATE_EVERY = 5  # frames with new samples between two medians (the level changes over seconds)
+MOTION_FLOOR = 1e-4  # the least share of its mount's process noise a camera keeps
+GAUSSIAN_MEDIAN_CHI2_1 = 0.4549  # median of a χ² variable with 1 degree of freedom: variance from a median of squares
+PLACEMENT_GAIN = 25.0  # σ × 5 on the pose that first places a camera: it only linearises; the same frame's corners,
+# applied right after, carry its information (else counted twice, and a lone marker's tilt, poorly fitted, sticks)
 CORNER_GATE_CHI2 = 26.12  # 8 degrees of freedom (a marker's four corners), 99.9 %
 TOPSIDE_PLACEMENT_M = 1.0  # σ of the topside's position when a single view first places it
 
@@ -62,6 +82,8 @@ class CameraMotion:
     accel_psd: float  # m²/s³, white-noise acceleration
     prior_rate_radps: float
     prior_speed_mps: float
+    adapts: bool = True  # its process noise follows the motion its images show (below); a hovering drone's
+    # jitter is fast at every scale (its 1 s level understates its frame-to-frame motion), so it keeps its prior
 
 
 @dataclass(frozen=True)
@@ -77,7 +99,8 @@ class FilterTuning:
     camera_motion: tuple[CameraMotion, ...] = (
         CameraMotion("fixed", 1e-8, 1e-6, 1e-4, 1e-3),  # bolted to the jacket or a platform
         CameraMotion("vessel", 1e-5, 0.1, 0.005, 0.3),  # on the crane vessel: metres and milliradians in waves
-        CameraMotion("drone", 1e-3, 0.5, 0.05, 1.0))  # flying: 0.3 m/s and 0.01 rad/s, changing within seconds
+        CameraMotion("drone", 1e-3, 0.5, 0.05, 1.0,  # flying: 0.3 m/s and 0.01 rad/s, changing within seconds
+                     adapts=False))
 
     def motion(self, mount: str) -> CameraMotion:
         """The motion prior of a camera mount."""
@@ -89,11 +112,29 @@ def skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def transition(dt: float, blocks: int = 1) -> np.ndarray:
-    """(12 B, 12 B) constant-velocity transition of B bodies over dt seconds."""
+def rate_decay(dt: float, tau: float) -> tuple[float, float]:
+    """(a, b) of a rate that reverts to zero with time constant tau (inf: constant velocity) over dt:
+    rate' = a rate, pose' = pose + b rate."""
+    if not np.isfinite(tau):
+        return 1.0, dt
+    a = float(np.exp(-dt / tau))
+    return a, tau * (1.0 - a)
+
+
+def transition(dt: float, blocks: int = 1, taus: list[float] | None = None) -> np.ndarray:
+    """(12 B, 12 B) transition of B bodies over dt seconds: constant velocity, or rates reverting to zero
+    with the time constants taus (one per body, inf for constant velocity)."""
+    ab = np.array([rate_decay(dt, np.inf if taus is None else tau) for tau in (taus or [np.inf] * blocks)])
+    return _transition(np.repeat(ab[:, 0], 6), np.repeat(ab[:, 1], 6))
+
+
+def _transition(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(12 B, 12 B) [[I, B], [0, A]] per body from the rates' decay a (6 B,) and their weight b (6 B,) on the pose."""
+    blocks = a.size // 6
+    pose, rate = _pose_rate_indices(blocks)
     F = np.eye(STATE * blocks)
-    for b in range(blocks):
-        F[b * STATE:b * STATE + 6, b * STATE + 6:(b + 1) * STATE] = dt * np.eye(6)
+    F[pose, rate] = b
+    F[rate, rate] = a
     return F
 
 
@@ -119,10 +160,11 @@ def process_noise(dt: float, tuning: FilterTuning) -> np.ndarray:
     return _block_noise(dt, [tuning.accel_psd] * 3 + [tuning.angular_accel_psd] * 3)
 
 
-def camera_process_noise(dt: float, tuning: FilterTuning, mount: str) -> np.ndarray:
-    """(12, 12) process noise of one camera on a mount over dt seconds (rotation first, then position)."""
+def camera_process_noise(dt: float, tuning: FilterTuning, mount: str, scale: float = 1.0) -> np.ndarray:
+    """(12, 12) process noise of one camera on a mount over dt seconds (rotation first, then position),
+    scaled by the share of the mount's motion the camera shows (1: all of it)."""
     m = tuning.motion(mount)
-    return _block_noise(dt, [m.angular_accel_psd] * 3 + [m.accel_psd] * 3)
+    return _block_noise(dt, [scale * m.angular_accel_psd] * 3 + [scale * m.accel_psd] * 3)
 
 
 def prior_covariance(tuning: FilterTuning) -> np.ndarray:
@@ -222,6 +264,58 @@ class CameraState:
     mount: str  # the rig's camera mount: its motion prior
     T_jacket_camera: np.ndarray | None = None  # (4, 4), None until a jacket view places the camera
     consecutive_rejects: int = 0
+    motion: CameraMotionLevel = field(default_factory=lambda: CameraMotionLevel())
+    motion_scale: float = 1.0  # share of its mount's process noise the camera gets (1 until its level is known)
+
+
+@dataclass
+class CameraMotionLevel:
+    """How much a camera moves, from the image motion of the jacket markers it sees (fixed in the world).
+
+    Each frame gives, per jacket marker and image axis, the second divided difference a of the marker
+    centre over MOTION_LAG_S (three samples about that far apart). Under white-noise angular acceleration
+    of psd q, Var(a) = (2/3) q f² / Δ px²/s⁴, so each a² (3/2) Δ / f² estimates q; the median of the last
+    MOTION_SAMPLES (robust to rain-struck corners) over the χ²₁ median gives the camera's level. Corner
+    noise alone reads as about 1e-8 rad²/s³: a still camera's level, below every mount's prior.
+    """
+
+    tracks: dict[int, tuple[list[float], list[tuple[float, float]]]] = field(default_factory=dict)  # jacket
+    # marker id -> times and centres (px) of its last 2.5 lags
+    samples: deque = field(default_factory=lambda: deque(maxlen=MOTION_SAMPLES))  # q estimates, rad²/s³
+    level: float | None = None  # angular acceleration psd the camera shows, rad²/s³ (None until enough samples)
+    pending: int = 0  # frames with new samples since the level was last taken
+
+    def add(self, time: float, corners: dict[int, np.ndarray], focal_px: float) -> None:
+        """One frame's jacket-marker corners (4, 2), undistorted pixels."""
+        added = False
+        for marker, z in corners.items():
+            times, centres = self.tracks.setdefault(marker, ([], []))
+            cx, cy = z.reshape(4, 2).sum(axis=0).tolist()
+            times.append(time)
+            centres.append((cx / 4, cy / 4))
+            old = bisect.bisect_left(times, time - 2.5 * MOTION_LAG_S)
+            if old:
+                del times[:old], centres[:old]
+            if times[0] > time - 1.75 * MOTION_LAG_S:
+                continue  # not yet two lags of history
+            i1, i0 = (self._nearest(times, time - k * MOTION_LAG_S) for k in (1, 2))
+            t0, t1 = times[i0], times[i1]
+            if not (t0 < t1 < time) or abs(t1 - (time - MOTION_LAG_S)) > 0.25 * MOTION_LAG_S:
+                continue
+            weight = 3.0 / ((time - t0) * focal_px**2)  # a² (3/2) Δ / f², a = 2 Δv / (2 Δ)
+            for k in range(2):
+                c0, c1, c2 = centres[i0][k], centres[i1][k], centres[-1][k]
+                self.samples.append(weight * ((c2 - c1) / (time - t1) - (c1 - c0) / (t1 - t0)) ** 2)
+            added = True
+        self.pending += added
+        if self.pending >= MOTION_UPDATE_EVERY and len(self.samples) >= MOTION_MIN_SAMPLES:
+            self.level = float(np.median(self.samples)) / GAUSSIAN_MEDIAN_CHI2_1
+            self.pending = 0
+
+    @staticmethod
+    def _nearest(times: list[float], t: float) -> int:
+        k = bisect.bisect_left(times, t)
+        return k if k == 0 or (k < len(times) and times[k] - t < t - times[k - 1]) else k - 1
 
 
 @dataclass
@@ -247,6 +341,7 @@ class TopsideFilter:
             for cam in self.cameras.values():
                 self._reset_camera(cam)
         self.topside_placed = False
+        self.placed_at: float | None = None  # capture time the topside was (last) placed, or first measured
         geometry = body_geometry(self.rig)
         self.jacket_corners = {i: body_object_points([T], self.rig.marker_size) for i, T in geometry.jacket.items()}
         self.topside_corners = {i: body_object_points([T], self.rig.marker_size)
@@ -277,22 +372,40 @@ class TopsideFilter:
         assert self.P is not None and self.x is not None
         dt = 0.0 if self.time is None else max(0.0, time - self.time)
         blocks = 1 + len(self.cameras)
-        F = transition(dt, blocks)
-        pose, rate = _pose_rate_indices(blocks)  # F = I + dt E, E moving rates into poses: F P Fᵀ in O(n²)
-        self.x = self.x.copy()
-        self.x[pose] += dt * self.x[rate]
+        a_cam, b_cam = rate_decay(dt, CAMERA_RATE_TAU_S)  # the topside keeps its speed, cameras' rates revert
+        a, b = np.full(6 * blocks, a_cam), np.full(6 * blocks, b_cam)
+        a[:6], b[:6] = 1.0, dt
+        F = _transition(a, b)
+        a, b = a.reshape(blocks, 6), b.reshape(blocks, 6)
+        self.x = self.x.copy()  # F = [[I, B], [0, A]] per body: F P Fᵀ in O(n²) on views of poses and rates
+        x = self.x.reshape(blocks, 2, 6)
+        x[:, 0] += b * x[:, 1]
+        x[:, 1] *= a
         P = self.P.copy()
-        P[pose, :] += dt * P[rate, :]
-        P[:, pose] += dt * P[:, rate]
+        rows = P.reshape(blocks, 2, 6, -1)
+        rows[:, 0] += b[:, :, None] * rows[:, 1]
+        rows[:, 1] *= a[:, :, None]
+        cols = P.reshape(-1, blocks, 2, 6)
+        cols[:, :, 0] += cols[:, :, 1] * b[None]
+        cols[:, :, 1] *= a[None]
         self.P = P
         self.P[:STATE, :STATE] += process_noise(dt, self.tuning)
         for cam in self.cameras.values():
             if cam.T_jacket_camera is not None:
                 self.P[cam.index:cam.index + STATE, cam.index:cam.index + STATE] += \
-                    camera_process_noise(dt, self.tuning, cam.mount)
+                    camera_process_noise(dt, self.tuning, cam.mount, cam.motion_scale)
         self._fold_cameras()
         self.time = time if self.time is None else max(self.time, time)
         return F
+
+    def _measure_motion(self, cam: CameraState, time: float, jacket: dict[int, np.ndarray], K: np.ndarray) -> None:
+        """A frame's jacket corners into the camera's motion level; its process noise scaled to that level."""
+        prior = self.tuning.motion(cam.mount)
+        if not ADAPTIVE_MOTION or not prior.adapts or not jacket:
+            return
+        cam.motion.add(time, jacket, float(K[0, 0] + K[1, 1]) / 2)
+        if cam.motion.level is not None:
+            cam.motion_scale = float(np.clip(cam.motion.level / prior.angular_accel_psd, MOTION_FLOOR, 1.0))
 
     def _fold_cameras(self) -> None:
         """Move the cameras' pose errors (and the motion their rates imply) into their nominal poses.
@@ -384,6 +497,8 @@ class TopsideFilter:
         self._apply(H, y, R)
         self.consecutive_rejects = 0
         self.last_accepted[m.camera] = m.time
+        if self.placed_at is None:
+            self.placed_at = m.time
         return True
 
     def _place_camera(self, cam: CameraState, o: BodyObservation) -> bool:
@@ -418,7 +533,7 @@ class TopsideFilter:
             options = [options[k]]
             gain = AMBIGUOUS_VARIANCE_GAIN
         T_cj, cov = options[0]
-        cov = gain * cov
+        cov = gain * PLACEMENT_GAIN * cov
         T_jc = inverse(T_cj)
 
         def camera_error(p: np.ndarray) -> np.ndarray:
@@ -447,6 +562,7 @@ class TopsideFilter:
         self.P[:STATE, :STATE] = prior_covariance(self.tuning)
         self.P[:3, :3] = np.eye(3) * TOPSIDE_PLACEMENT_M**2
         self.topside_placed = True
+        self.placed_at = self.time
         return True
 
     def _predict_corners(self, cam: CameraState, marker: int, x: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -516,6 +632,7 @@ class TopsideFilter:
                 o = BodyObservation(o.time, o.camera, o.jacket, None,
                                     {i: c for i, c in o.corners.items() if i in self.jacket_corners}, o.K)
         jacket = {i: z for i, z in o.corners.items() if i in self.jacket_corners}
+        self._measure_motion(cam, o.time, jacket, o.K)
         topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
         used_jacket = self._corner_update(cam, jacket, o.K, False)  # the camera first, then the topside
         used_topside = self._corner_update(cam, topside, o.K, True)  # through the camera just refined
@@ -547,11 +664,14 @@ class TopsideFilter:
         assert x is not None and P is not None
         time = self.time if time is None else time
         cameras = self.contributing() if cameras is None else cameras
+        limit = REPORT_MAX_SIGMA_M
+        if x is self.x and (self.placed_at is None or time - self.placed_at < REPORT_WARMUP_S):
+            limit = REPORT_WARMUP_SIGMA_M  # the live filter warming up (the smoother has seen it all)
         out = []
         for cone, r in sorted(self.cones.items()):
             H = point_offset_matrix(r)
             cov = H @ P[:STATE, :STATE] @ H.T
-            offset = H @ x[:STATE] if np.sqrt(np.diag(cov)).max() <= REPORT_MAX_SIGMA_M else np.full(3, np.nan)
+            offset = H @ x[:STATE] if np.sqrt(np.diag(cov)).max() <= limit else np.full(3, np.nan)
             out.append(ConeEstimate(time, cone, offset, cameras, cov))
         return out
 

@@ -89,7 +89,7 @@ def cone_markdown(reading: ConeReading, stale_s: float = STALE_S) -> str:
         elif reading.age > stale_s:
             why = f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)"
         else:
-            why = "the cameras do not see this cone well enough (1σ above 50 mm)"
+            why = "the cameras do not see this cone well enough (1σ above 50 mm; 25 mm before its first figure)"
         return f"{headline}\n# NO DATA\n\n{why}"
     dx, dy, dz = reading.offset
     return (f"{headline}\n"

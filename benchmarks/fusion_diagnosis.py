@@ -1,0 +1,114 @@
+"""Where the fused filter's largest errors come from, on the accuracy benchmark's cached runs.
+
+For every run (benchmarks/accuracy.py must have cached its renders and detections): the largest fused
+error, when it happens (and the largest after the first 3 s of estimates), the filter's own σ there,
+and the same filter given the simulator's true camera poses at every frame (a diagnosis only: the filter
+never reads the truth). Results: benchmarks/results/fusion_diagnosis.md.
+
+Run: .venv/bin/python benchmarks/fusion_diagnosis.py [--only config2-procedure5 ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import pickle
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from accuracy import CACHE, RESULTS, RUNS, WEATHER, measure, with_mounts
+
+from tracking import fusion
+from tracking.evaluate import truth_at
+from tracking.rig import load_rig
+
+OUT = RESULTS.parent / "fusion_diagnosis.md"
+STARTUP_S = 3.0
+
+
+class TrueCameras(fusion.TopsideFilter):
+    """The filter with every camera's pose set to the truth at each step (its block decoupled, exact)."""
+
+    truth: pd.DataFrame
+
+    def predict(self, time: float) -> np.ndarray:
+        F = super().predict(time)
+        assert self.x is not None and self.P is not None and self.time is not None
+        t = self.truth["time"].to_numpy()
+        for name, cam in self.cameras.items():
+            p = [np.interp(self.time, t, self.truth[f"camera_{name}_{a}"]) for a in ("x", "y", "z", "rx", "ry", "rz")]
+            T = np.eye(4)
+            T[:3, :3] = fusion.rotation(np.array(p[3:]))
+            T[:3, 3] = p[:3]
+            cam.T_jacket_camera = T
+            b = slice(cam.index, cam.index + fusion.STATE)
+            self.x[b] = 0.0
+            self.P[b, :] = 0.0
+            self.P[:, b] = 0.0
+            self.P[b, b] = 1e-12 * np.eye(fusion.STATE)
+        return F
+
+
+def errors(kf: fusion.TopsideFilter, measurements: list, truth: pd.DataFrame, monitored: list[str]) -> pd.DataFrame:
+    """Per reported estimate at a monitored cone: time, cone, error (m) and σ per axis."""
+    rows = []
+    for group in fusion._frames(measurements):
+        for e in fusion.filter_frame(kf, group):
+            if e.cone in monitored and np.isfinite(e.offset).all():
+                err = e.offset - truth_at(truth, e.cone, np.array([e.time]))[0]
+                rows.append((e.time, e.cone, *err, *np.sqrt(np.diag(e.covariance))))
+    return pd.DataFrame(rows, columns=["time", "cone", "ex", "ey", "ez", "sx", "sy", "sz"])
+
+
+def worst(df: pd.DataFrame) -> str:
+    """The largest error: mm, axis, cone, time, and |e|/σ there."""
+    if df.empty:
+        return "—"
+    e = df[["ex", "ey", "ez"]].abs().to_numpy()
+    i, k = np.unravel_index(np.argmax(e), e.shape)
+    r = df.iloc[i]
+    sd = r[["sx", "sy", "sz"]].to_numpy()[k]
+    return f"{e[i, k] * 1e3:.0f} ({'xyz'[k]}, {r.cone}, {r.time:.1f} s, {e[i, k] / sd:.1f}σ)"
+
+
+def main() -> None:
+    """Diagnose every cached run and write the table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="*", default=None)
+    args = parser.parse_args()
+    lines = ["# Where the fused filter's largest errors come from", "",
+             "Fused (live) filter on the accuracy benchmark's runs (fog 50 %, rain 30 %, 15 FPS). Largest error "
+             f"over the run and after the first {STARTUP_S:g} s of estimates, mm (axis, cone, capture time, and "
+             "the error over the filter's own σ there); σ_e per axis; and the same filter given the simulator's "
+             "true camera poses (diagnosis only).", "",
+             "| run | largest | after the start | σ_e x/y/z [mm] | true cameras: largest | true cameras: σ_e |",
+             "| --- | --- | --- | ---: | --- | ---: |"]
+    for name in RUNS:
+        if args.only is not None and name not in args.only:
+            continue
+        scene = CACHE / f"{name}{WEATHER}-15fps"
+        if not (scene / "detections.pkl").is_file():
+            continue
+        rig = with_mounts(load_rig(scene / "rig.yaml"), name)
+        measurements = measure(rig, pickle.loads((scene / "detections.pkl").read_bytes()))
+        truth = pd.read_csv(scene / "truth.csv")
+        monitored = sorted({p.cone for p in rig.all_pairs()})
+        fused = errors(fusion.TopsideFilter(rig), measurements, truth, monitored)
+        oracle = TrueCameras(rig)
+        oracle.truth = truth
+        exact = errors(oracle, measurements, truth, monitored)
+        late = fused[fused["time"] > fused["time"].min() + STARTUP_S]
+
+        def sd(df: pd.DataFrame) -> str:
+            return "/".join(f"{df[c].std() * 1e3:.1f}" for c in ("ex", "ey", "ez"))
+
+        lines.append(f"| {name} | {worst(fused)} | {worst(late)} | {sd(fused)} | {worst(exact)} | {sd(exact)} |")
+        print(lines[-1], flush=True)
+    OUT.write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
