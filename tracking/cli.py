@@ -385,7 +385,7 @@ def live(
     from tracking.live import LiveTracker
     from tracking.report import write_offsets_csv
     from tracking.rig import load_rig
-    from viewer.playback import start_live_viewer
+    from viewer.playback import start_live_viewer, stop_viewer
     from viewer.session import Recorder
 
     if stale <= 0 or segment_minutes <= 0 or speed <= 0:
@@ -423,7 +423,7 @@ def live(
     finally:
         recorder.close()
         if viewer_process is not None and not spawn:
-            viewer_process.terminate()
+            stop_viewer(viewer_process)
     console.print(f"wrote {n_rows} rows to {out}; recording {rrd.with_name(rrd.stem + '-*.rrd')}")
 
 

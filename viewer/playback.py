@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -89,8 +90,22 @@ def start_live_viewer(web: bool, bind: str = "127.0.0.1", grpc_port: int = GRPC_
         warn_if_exposed(bind)
         cmd = [rerun_binary(), "--serve-web", "--bind", bind, "--port", str(grpc_port),
                "--web-viewer-port", str(web_port), "--server-memory-limit", VIEWER_MEMORY_LIMIT]
-    process = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=viewer_env())
+    process = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=viewer_env(),
+                               start_new_session=True)  # its own group: `rerun` is a wrapper around the server
     return f"rerun+http://127.0.0.1:{grpc_port}/proxy", process
+
+
+def stop_viewer(process: subprocess.Popen, timeout: float = 10.0) -> None:
+    """Stop a live viewer and the server its `rerun` wrapper started (terminating the wrapper alone leaves it)."""
+    try:
+        os.killpg(process.pid, signal.SIGTERM)
+    except ProcessLookupError:
+        return
+    try:
+        process.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
 
 
 def segment_index(recording: Path) -> Path | None:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import rerun as rr
 
-from viewer.playback import start_live_viewer, warn_if_exposed
+from viewer.playback import start_live_viewer, stop_viewer, warn_if_exposed
 
 
 def free_port() -> int:
@@ -49,8 +49,8 @@ def test_web_viewer_serves_the_page_and_takes_the_stream_on_localhost_only() -> 
         rec.flush(timeout_sec=10.0)  # raises if the viewer's server does not take it
         assert process.poll() is None
     finally:
-        process.terminate()
-        process.wait(timeout=10)
+        stop_viewer(process)
+    assert not listening_addresses(web_port) and not listening_addresses(grpc_port)  # the server went with it
 
 
 def test_exposing_the_viewer_warns(capsys) -> None:
