@@ -8,6 +8,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -104,8 +105,13 @@ def stop_viewer(process: subprocess.Popen, timeout: float = 10.0) -> None:
     try:
         process.wait(timeout=timeout)
     except subprocess.TimeoutExpired:
+        pass
+    time.sleep(0.5)  # the wrapper exits first; the server gets a moment to close, then whatever is left is killed
+    try:
         os.killpg(process.pid, signal.SIGKILL)
-        process.wait()
+    except ProcessLookupError:
+        pass
+    process.wait()
 
 
 def segment_index(recording: Path) -> Path | None:

@@ -50,7 +50,10 @@ def test_web_viewer_serves_the_page_and_takes_the_stream_on_localhost_only() -> 
         assert process.poll() is None
     finally:
         stop_viewer(process)
-    assert not listening_addresses(web_port) and not listening_addresses(grpc_port)  # the server went with it
+    deadline = time.monotonic() + 10.0  # the server went with it (its sockets close as it exits)
+    while (listening_addresses(web_port) or listening_addresses(grpc_port)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not listening_addresses(web_port) and not listening_addresses(grpc_port)
 
 
 def test_exposing_the_viewer_warns(capsys) -> None:
