@@ -77,11 +77,13 @@ def decoded_frames(container: av.container.InputContainer, source: str | Path, t
     try:
         for packet in container.demux(stream):
             pts, key = packet.pts, packet.is_keyframe
-            for frame in packet.decode():
+            decoded = packet.decode()
+            if annexb is not None and packet.size:  # before the frames go out: a decoder without delay (one
+                # thread, one core) returns the packet's own frame at once. After decoding: the filter takes the data
+                pending[pts] = (b"".join(bytes(p) for p in annexb.filter(packet)), key)
+            for frame in decoded:
                 yield _frame(frame, index, fallback_dt, time_offset, keep_color, pending.pop(frame.pts, None))
                 index += 1
-            if annexb is not None and packet.size:
-                pending[pts] = (b"".join(bytes(p) for p in annexb.filter(packet)), key)
     except av.error.FFmpegError as exc:
         raise InputError(source, f"video is damaged after frame {index} ({exc.strerror or exc})") from None
 
