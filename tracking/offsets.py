@@ -11,7 +11,6 @@ from tracking.camera import CameraModel
 from tracking.pose import BodyPose, Choice, MarkerPose, estimate_body_pose
 from tracking.rig import Pair, Rig
 
-JACOBIAN_STEP = 1e-6  # rad or m, for the numeric Jacobian of the offset
 MAX_PAIR_TILT_RAD = np.deg2rad(10.0)  # topside and jacket markers of a pair are never this far from parallel
 
 
@@ -87,27 +86,23 @@ def pair_geometries(rig: Rig) -> list[PairGeometry]:
     return [PairGeometry(p, rig.T_W_S_mated(p), by_id[p.jacket].T_body_marker[:3, :3]) for p in rig.all_pairs()]
 
 
-def _offset_from_params(geometry: PairGeometry, params: np.ndarray) -> np.ndarray:
-    """Offset (3,) from (rvec_W, tvec_W, rvec_S, tvec_S) (12,): eq. 16 then topside minus mated."""
-    R_cw = cv2.Rodrigues(params[0:3])[0]
-    t_ws = R_cw.T @ (params[9:12] - params[3:6])
-    return geometry.R_jacket_W @ (t_ws - geometry.T_W_S_mated[:3, 3])
+def offset_jacobian(geometry: PairGeometry, T_camera_W: np.ndarray, T_camera_S: np.ndarray) -> np.ndarray:
+    """(3, 12) derivative of the offset R_jacket_W (R_camera_W^T (t_S - t_W) - t_mated) with respect to
+    (rvec_W, tvec_W, rvec_S, tvec_S): analytic, through the Jacobian of OpenCV's Rodrigues (the offset does not
+    depend on the topside marker's rotation)."""
+    R_cw, dR = cv2.Rodrigues(cv2.Rodrigues(np.asarray(T_camera_W[:3, :3], dtype=np.float64))[0])
+    d = T_camera_S[:3, 3] - T_camera_W[:3, 3]
+    J = np.zeros((3, 12))
+    J[:, 0:3] = geometry.R_jacket_W @ np.stack([dR[k].reshape(3, 3).T @ d for k in range(3)], axis=1)
+    J[:, 9:12] = geometry.R_jacket_W @ R_cw.T
+    J[:, 3:6] = -J[:, 9:12]
+    return J
 
 
 def offset_covariance(geometry: PairGeometry, W: MarkerPose, S: MarkerPose) -> np.ndarray:
-    """(3, 3) covariance of a pair offset: both markers' (6, 6) pose covariances through a numeric Jacobian."""
-    params = np.concatenate([cv2.Rodrigues(W.T_camera_marker[:3, :3])[0].reshape(3), W.T_camera_marker[:3, 3],
-                             cv2.Rodrigues(S.T_camera_marker[:3, :3])[0].reshape(3), S.T_camera_marker[:3, 3]])
-    base = _offset_from_params(geometry, params)
-    J = np.empty((3, 12))
-    for k in range(12):
-        step = np.zeros(12)
-        step[k] = JACOBIAN_STEP
-        J[:, k] = (_offset_from_params(geometry, params + step) - base) / JACOBIAN_STEP
-    C = np.zeros((12, 12))
-    C[:6, :6] = W.covariance
-    C[6:, 6:] = S.covariance
-    return J @ C @ J.T
+    """(3, 3) covariance of a pair offset: both markers' (6, 6) pose covariances through offset_jacobian."""
+    J = offset_jacobian(geometry, W.T_camera_marker, S.T_camera_marker)
+    return J[:, :6] @ W.covariance @ J[:, :6].T + J[:, 6:] @ S.covariance @ J[:, 6:].T
 
 
 def pair_offset(geometry: PairGeometry, W: MarkerPose, S: MarkerPose, camera: str, time: float) -> PairOffset:

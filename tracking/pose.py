@@ -88,7 +88,10 @@ def pose_covariance(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarra
     """(6, 6) covariance of (rvec, tvec) for isotropic corner noise sigma_px: σ² (JᵀJ)⁻¹ (Gauss-Newton)."""
     _, jac = cv2.projectPoints(object_points, rvec, tvec, K, None)
     J = jac[:, :6]
-    return sigma_px**2 * np.linalg.pinv(J.T @ J)
+    try:
+        return sigma_px**2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:  # a degenerate view: the pseudo-inverse, as before
+        return sigma_px**2 * np.linalg.pinv(J.T @ J)
 
 
 def estimate_pose(detection: MarkerDetection, camera: CameraModel, marker_size: float) -> MarkerPose:

@@ -11,6 +11,7 @@ looks astern (+y); its x axis then points to starboard (-x).
 
 from __future__ import annotations
 
+from functools import cached_property
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -77,12 +78,13 @@ class Marker(_Model):
             raise ValueError("normal: must not be zero")
         return self
 
-    @property
+    @cached_property
     def T_body_marker(self) -> np.ndarray:
-        """(4, 4) pose of the marker in its body's frame."""
+        """(4, 4) pose of the marker in its body's frame; computed once (the model is frozen), read-only."""
         T = np.eye(4)
         T[:3, :3] = normal_rotation(np.array(self.normal)) if self.normal else face_rotation(self.face)
         T[:3, 3] = self.center
+        T.flags.writeable = False
         return T
 
 

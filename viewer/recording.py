@@ -135,9 +135,11 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
     axes = [seg for pose in result.poses.values() for seg in marker_axes_px(pose, camera, rig.marker_size / 2)]
     rr.log(f"{base}/image/markers",  # one entity: outlines labelled by id, reprojected axes, corners TL TR BR BL
            rr.LineStrips2D(outlines + axes, labels=[str(m.id) for m in markers] + [""] * len(axes),
-                           colors=colors + AXIS_COLORS * len(result.poses), radii=1.0),
+                           colors=np.array(colors + AXIS_COLORS * len(result.poses), dtype=np.uint8).reshape(-1, 3),
+                           radii=1.0),
            rr.Points2D(np.vstack([m.corners for m in markers]) if markers else np.zeros((0, 2)), radii=2.0,
-                       colors=[*AXIS_COLORS, (255, 255, 255)] * len(markers)), recording=rec)
+                       colors=np.array([*AXIS_COLORS, (255, 255, 255)] * len(markers), dtype=np.uint8).reshape(-1, 3)),
+           recording=rec)
     if show_rejected:
         rr.log(f"{base}/image/rejected", rr.LineStrips2D(
             [np.vstack([c, c[:1]]) for c in result.detections.rejected], colors=REJECTED_COLOR, radii=0.5),
@@ -160,20 +162,25 @@ def log_health(rec: rr.RecordingStream, result: FrameResult) -> None:
                rr.Scalars(float(np.mean([p.reprojection_error for p in result.poses.values()]))), recording=rec)
 
 
+def quaternions_xyzw(rotations: np.ndarray) -> np.ndarray:
+    """Unit quaternions (N, 4), x y z w, of rotation matrices (N, 3, 3) (through OpenCV's Rodrigues)."""
+    rvecs = np.array([cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0].reshape(3) for R in rotations]).reshape(-1, 3)
+    angles = np.linalg.norm(rvecs, axis=1)
+    axes = np.divide(rvecs, angles[:, None], out=np.zeros_like(rvecs), where=angles[:, None] > 0)
+    return np.column_stack([axes * np.sin(angles / 2)[:, None], np.cos(angles / 2)])
+
+
 def log_marker_frames(rec: rr.RecordingStream, path: str, size: float, T_jacket_marker: dict[int, np.ndarray],
                       colors: list[tuple[int, int, int]]) -> None:
     """Markers' frames as one camera estimates them (4, 4 each): boxes labelled by id and their axes, one entity."""
-    Ts = list(T_jacket_marker.values())
-    centres = [T[:3, 3] for T in Ts]
-    rotations = [cv2.Rodrigues(T[:3, :3])[0].reshape(3) for T in Ts]
-    rr.log(path, rr.Boxes3D(centers=centres, half_sizes=[[size / 2, size / 2, MARKER_THICKNESS_M]] * len(Ts),
-                            rotation_axis_angles=[rr.RotationAxisAngle(axis=r / (np.linalg.norm(r) or 1.0),
-                                                                       radians=float(np.linalg.norm(r)))
-                                                  for r in rotations],
-                            colors=colors, labels=[str(i) for i in T_jacket_marker]),
-           rr.Arrows3D(origins=[c for c in centres for _ in range(3)],
-                       vectors=[T[:3, k] * AXIS_LENGTH_M for T in Ts for k in range(3)],
-                       colors=AXIS_COLORS * len(Ts)), recording=rec)
+    Ts = np.array(list(T_jacket_marker.values())).reshape(-1, 4, 4)
+    centres = Ts[:, :3, 3]
+    rr.log(path, rr.Boxes3D(centers=centres, half_sizes=np.tile([size / 2, size / 2, MARKER_THICKNESS_M], (len(Ts), 1)),
+                            quaternions=quaternions_xyzw(Ts[:, :3, :3]), colors=np.array(colors, dtype=np.uint8),
+                            labels=[str(i) for i in T_jacket_marker]),
+           rr.Arrows3D(origins=np.repeat(centres, 3, axis=0),  # each marker's x, y, z axes: the columns of R
+                       vectors=(Ts[:, :3, :3].transpose(0, 2, 1) * AXIS_LENGTH_M).reshape(-1, 3),
+                       colors=np.tile(np.array(AXIS_COLORS, dtype=np.uint8), (len(Ts), 1))), recording=rec)
 
 
 def time_column(times: np.ndarray) -> rr.TimeColumn:

@@ -304,8 +304,9 @@ class Recorder:
             self._log_board(update)
 
     def _log_board(self, update: LiveUpdate) -> None:
-        """Every cone's reading and the camera table at the update's live time; the estimates so far."""
-        self.flush_estimates()
+        """Every cone's reading and the camera table at the update's live time; the estimates waiting FLUSH_S."""
+        if self._estimates and update.now - self._estimates[0].time >= FLUSH_S:  # a series per call: fewer chunks
+            self.flush_estimates()
         self._board_logged = update.now
         for cone in self.cones:
             reading = cone_reading(self.status.latest.get(cone), cone, update.now, update.last_measurement,

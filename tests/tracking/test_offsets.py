@@ -17,7 +17,7 @@ from tests.synthetic import (
 )
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetector
-from tracking.offsets import frame_offsets, pair_geometries, relative_pose
+from tracking.offsets import PairGeometry, frame_offsets, offset_jacobian, pair_geometries, relative_pose
 from tracking.pose import estimate_pose
 from tracking.rig import Rig
 
@@ -35,6 +35,31 @@ def test_relative_pose_is_inverse_composition() -> None:
         T[:3, 3] = rng.normal(size=3) * 10
         Ts.append(T)
     np.testing.assert_allclose(relative_pose(*Ts), np.linalg.inv(Ts[0]) @ Ts[1], atol=1e-12)
+
+
+def test_offset_jacobian_matches_finite_differences() -> None:
+    import cv2
+
+    rng = np.random.default_rng(7)
+    T_W_S_mated = np.eye(4)
+    T_W_S_mated[:3, 3] = [0.0, 3.0, 0.0]
+    geometry = PairGeometry(None, T_W_S_mated, cv2.Rodrigues(rng.normal(size=3))[0])  # type: ignore[arg-type]
+
+    def offset(params: np.ndarray) -> np.ndarray:
+        """The offset from (rvec_W, tvec_W, rvec_S, tvec_S), the way pair_offset computes it."""
+        T_cw, T_cs = np.eye(4), np.eye(4)
+        T_cw[:3, :3], T_cw[:3, 3] = cv2.Rodrigues(params[0:3])[0], params[3:6]
+        T_cs[:3, :3], T_cs[:3, 3] = cv2.Rodrigues(params[6:9])[0], params[9:12]
+        return geometry.R_jacket_W @ (relative_pose(T_cw, T_cs)[:3, 3] - T_W_S_mated[:3, 3])
+
+    for _ in range(5):
+        params = np.concatenate([rng.normal(size=3), rng.normal(size=3) * 10, rng.normal(size=3),
+                                 rng.normal(size=3) * 10])
+        numeric = np.stack([(offset(params + h) - offset(params - h)) / 2e-6 for h in np.eye(12) * 1e-6], axis=1)
+        T_cw, T_cs = np.eye(4), np.eye(4)
+        T_cw[:3, :3], T_cw[:3, 3] = cv2.Rodrigues(params[0:3])[0], params[3:6]
+        T_cs[:3, :3], T_cs[:3, 3] = cv2.Rodrigues(params[6:9])[0], params[9:12]
+        np.testing.assert_allclose(offset_jacobian(geometry, T_cw, T_cs), numeric, atol=1e-6)
 
 
 @pytest.mark.parametrize("offset", [[0.0, 0.0, 0.0], [0.35, -0.2, 0.6], [-1.2, 0.8, 2.5]])
