@@ -6,7 +6,7 @@ A simulated set-down in fog and rain (15 FPS, 920×600) is replayed in a loop, c
 the resident memory (RSS) of the main process and of the camera workers is sampled. Pass: RSS grows by less than
 50 MB after the first minute, and the recording stays under 1 GB per camera-hour.
 
-Run: .venv/bin/python benchmarks/soak.py [--hours 6] [--cameras 4]      Results: benchmarks/results/soak.md
+Run: .venv/bin/python -m benchmarks.soak [--hours 6] [--cameras 4]    Results: benchmarks/results/soak-<N>cam.md
 """
 
 from __future__ import annotations
@@ -20,11 +20,12 @@ from pathlib import Path
 
 from benchmarks.scenes import CACHE, render_scene
 from benchmarks.throughput import SCENARIO, streams_rig
+from tracking.cli import LIVE_ESTIMATE_PERIOD_S
 from tracking.live import LiveTracker
 from tracking.rig import load_rig
 from viewer.session import BACKLOG_TIMEOUT_S, Recorder
 
-RESULTS = Path(__file__).resolve().parent / "results" / "soak.md"
+RESULTS = Path(__file__).resolve().parent / "results"
 CLIP_S = 20.0
 SEGMENT_S = 60.0  # as `topside live` (LIVE_SEGMENT_MIN)
 SAMPLE_S = 10.0
@@ -54,7 +55,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory(dir=CACHE) as tmp:
         work = Path(tmp)
         rig = load_rig(streams_rig(scene, args.cameras, work))
-        recorder = Recorder(rig, work / "soak.rrd", segment_s=SEGMENT_S)
+        recorder = Recorder(rig, work / "soak.rrd", segment_s=SEGMENT_S, estimate_period_s=LIVE_ESTIMATE_PERIOD_S)
         t_wall = time.perf_counter()
         next_sample = None
         with LiveTracker(rig, speed=math.inf, loop_until=args.hours * 3600) as tracker:
@@ -112,9 +113,10 @@ def write(samples: list[tuple[float, float, float, float]], args: argparse.Names
     step = max(1, len(samples) // 40)
     for s in samples[::step] + ([samples[-1]] if (len(samples) - 1) % step else []):
         lines.append(f"| {s[0]:.0f} | {s[1]:.0f} | {s[2]:.1f} | {s[3]:.1f} |")
-    RESULTS.write_text("\n".join(lines) + "\n")
+    path = RESULTS / f"soak-{args.cameras}cam.md"
+    path.write_text("\n".join(lines) + "\n")
     if done:
-        print(f"wrote {RESULTS}")
+        print(f"wrote {path}")
 
 
 if __name__ == "__main__":

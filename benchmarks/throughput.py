@@ -26,6 +26,7 @@ import cv2
 import yaml
 
 from benchmarks.scenes import FPS, render_scene
+from tracking.cli import LIVE_ESTIMATE_PERIOD_S
 from tracking.images import frames
 from tracking.live import LiveTracker
 from tracking.rig import load_rig
@@ -52,7 +53,7 @@ def streams_rig(scene: Path, n: int, work: Path) -> Path:
 def run_live(rig_path: Path, speed: float, work: Path) -> dict:
     """One live run with recording: frames, share used, frames/s after the first frame."""
     rig = load_rig(rig_path)
-    recorder = Recorder(rig, work / f"run-{len(rig.cameras)}-{speed}.rrd")
+    recorder = Recorder(rig, work / f"run-{len(rig.cameras)}-{speed}.rrd", estimate_period_s=LIVE_ESTIMATE_PERIOD_S)
     n = used = 0
     t_first = t_last = None
     with LiveTracker(rig, speed=speed) as tracker:

@@ -358,7 +358,7 @@ def view(
         open_viewer(window_recording(recording, start, end, Path(work)), web=web, bind=bind)
 
 
-LIVE_SEGMENT_MIN = 1.0  # short: rerun-sdk 0.41's file sink holds memory per file (rerun-io/rerun#12623)
+LIVE_SEGMENT_MIN = 1.0  # a minute a file: quick to open, and `topside view --from --to` picks the window
 LIVE_ESTIMATE_PERIOD_S = 1 / 30  # the recording keeps a cone's estimates at up to 30 Hz (the CSV keeps all)
 
 
