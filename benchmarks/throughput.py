@@ -7,6 +7,8 @@ Recorder writing the .rrd, twice:
   - in real time (each file at its own 15 FPS): the share of frames used, searched by their worker and fused by
     the main process; the rest were recorded but skipped to keep up. Real time for N streams means 100 % used.
 Beside it, in the same run, plain OpenCV: decode and `detectMarkers` with default parameters, one stream, one core.
+And where the CPU goes: every stage run alone over the scene's cameras, CPU ms per frame (all threads of the process),
+so the ceiling of 2 cores and what the targets would need can be read off.
 
 Run: .venv/bin/python -m benchmarks.throughput [--streams 1 4 8] [--seconds 10]
 Results: benchmarks/results/throughput.md (scenes: benchmarks/scenes.py).
@@ -20,6 +22,7 @@ import os
 import platform
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -27,8 +30,11 @@ import yaml
 
 from benchmarks.scenes import FPS, render_scene
 from tracking.cli import LIVE_ESTIMATE_PERIOD_S
+from tracking.detection import DEFAULT_REFINEMENT
+from tracking.fusion import FilterTuning, TopsideFilter, filter_frame
 from tracking.images import frames
 from tracking.live import LiveTracker
+from tracking.pipeline import CameraTracker
 from tracking.rig import load_rig
 from viewer.session import Recorder
 
@@ -36,6 +42,8 @@ REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "benchmarks" / "results" / "throughput.md"
 SCENARIO = "config2-setdown-weather"
 RESOLUTIONS = {"920×600": (920, 600), "1920×1080": (1920, 1080)}
+STAGES = ("decode", "detection (search and edge fit)", "poses, pair offsets, body observations", "fusion",
+          "recording", "plain detectMarkers")
 
 
 def streams_rig(scene: Path, n: int, work: Path) -> Path:
@@ -83,6 +91,50 @@ def plain_opencv(scene: Path) -> float:
     return n / (time.perf_counter() - t0)
 
 
+def stage_costs(scene: Path) -> dict[str, float]:
+    """CPU ms per frame of each stage of the live path run alone, over every camera of the scene, and of OpenCV's
+    default detectMarkers on the same frames (process CPU time: decoder and recorder threads included)."""
+    cv2.setNumThreads(1)  # as in the workers
+    rig = load_rig(scene / "rig.yaml")
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, rig.dictionary)),
+                                       cv2.aruco.DetectorParameters())
+    cpu = dict.fromkeys(STAGES, 0.0)
+    results = []
+    n = 0
+    for entry in rig.cameras:
+        tracker = CameraTracker.from_rig(rig, entry, DEFAULT_REFINEMENT, packets=True, roi_tracking=True)
+        t = time.process_time()
+        decoded = list(frames(rig.resolve(entry.source), entry.time_offset, packets=True))
+        cpu["decode"] += time.process_time() - t
+        t = time.process_time()
+        detections = [tracker.detector.detect(f.gray) for f in decoded]
+        cpu["detection (search and edge fit)"] += time.process_time() - t
+        t = time.process_time()
+        results += [tracker.measure(f, d) for f, d in zip(decoded, detections, strict=True)]
+        cpu["poses, pair offsets, body observations"] += time.process_time() - t
+        t = time.process_time()
+        for f in decoded:
+            detector.detectMarkers(f.gray)
+        cpu["plain detectMarkers"] += time.process_time() - t
+        n += len(decoded)
+    results.sort(key=lambda r: r.time)
+    kf = TopsideFilter(rig, FilterTuning())
+    t = time.process_time()
+    estimates = [filter_frame(kf, [*r.offsets, *([r.observation] if r.observation is not None else [])])
+                 if r.offsets or r.observation is not None else [] for r in results]
+    cpu["fusion"] = time.process_time() - t
+    with tempfile.TemporaryDirectory() as tmp:
+        recorder = Recorder(rig, Path(tmp) / "stages.rrd", estimate_period_s=LIVE_ESTIMATE_PERIOD_S)
+        t = time.process_time()
+        for r, es in zip(results, estimates, strict=True):
+            recorder.on_frame(replace(r, frame=replace(r.frame, gray=None)))  # as the workers ship them
+            for e in es:
+                recorder.on_estimate(e)
+        recorder.close()
+        cpu["recording"] = time.process_time() - t
+    return {k: v / n * 1e3 for k, v in cpu.items()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--streams", type=int, nargs="+", default=[1, 4, 8])
@@ -90,8 +142,11 @@ def main() -> None:
     parser.add_argument("--resolutions", nargs="+", default=list(RESOLUTIONS))
     args = parser.parse_args()
     rows = []
+    costs = {}
     for label in args.resolutions:
         scene = render_scene(SCENARIO, RESOLUTIONS[label], args.seconds)
+        costs[label] = stage_costs(scene)
+        print(f"{label}: " + ", ".join(f"{k} {v:.2f}" for k, v in costs[label].items()) + " ms/frame", flush=True)
         plain = plain_opencv(scene)
         print(f"{label}: plain OpenCV detectMarkers {plain:.1f} frames/s (one core)", flush=True)
         for n in args.streams:
@@ -106,10 +161,10 @@ def main() -> None:
             print(f"{label} {n} streams: {flat['fps']:.1f} frames/s flat out ({row[3]:.1f}× plain), "
                   f"real time {real['used']:.0%} used", flush=True)
         rows.append((label, "plain", plain, 1.0, math.nan, math.nan))
-    write(rows, args)
+    write(rows, costs, args)
 
 
-def write(rows: list[tuple], args: argparse.Namespace) -> None:
+def write(rows: list[tuple], costs: dict[str, dict[str, float]], args: argparse.Namespace) -> None:
     """The results table as markdown."""
     lines = ["# Throughput of the live path", "",
              f"`benchmarks/throughput.py`, {args.seconds:g} s of `{SCENARIO}` at {FPS:g} FPS per stream, "
@@ -125,6 +180,23 @@ def write(rows: list[tuple], args: argparse.Namespace) -> None:
             lines.append(f"| {label} | plain `detectMarkers`, 1 stream | {fps:.1f} | 1.0 | — | — |")
         else:
             lines.append(f"| {label} | {n} | {fps:.1f} | {ratio:.1f} | {used:.0%} | {gb:.2f} |")
+    labels = list(costs)
+    lines += ["", "## Where the CPU goes", "",
+              "Each stage alone over the scene's cameras, CPU ms per frame (all threads of the process; the "
+              "recorder's own threads included).", "",
+              "| stage | " + " | ".join(labels) + " |", "|---|" + "---:|" * len(labels)]
+    ours = [s for s in STAGES if s != "plain detectMarkers"]
+    for stage in STAGES:
+        lines.append(f"| {stage} | " + " | ".join(f"{costs[k][stage]:.2f}" for k in labels) + " |")
+    total = {k: sum(costs[k][s] for s in ours) for k in labels}
+    plain = {k: costs[k]["decode"] + costs[k]["plain detectMarkers"] for k in labels}
+    lines += ["| **live path, total** | " + " | ".join(f"**{total[k]:.2f}**" for k in labels) + " |",
+              "| plain OpenCV (decode and detectMarkers) | " + " | ".join(f"{plain[k]:.2f}" for k in labels) + " |",
+              "| ceiling of 2 cores, frames/s (2000 / total) | " + " | ".join(f"{2000 / total[k]:.0f}" for k in labels)
+              + " |",
+              "| 8 × 15 FPS would need, ms per frame at most | " + " | ".join("16.67" for _ in labels) + " |",
+              "| 3× plain on 2 cores would need, ms per frame at most | "
+              + " | ".join(f"{2 * plain[k] / 3:.2f}" for k in labels) + " |"]
     RESULTS.write_text("\n".join(lines) + "\n")
     print(f"wrote {RESULTS}")
 

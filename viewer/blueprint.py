@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import rerun as rr
 import rerun.blueprint as rrb
+from rerun import bindings
 
 from tracking.rig import Rig
 
@@ -11,6 +13,31 @@ EYE_OFFSET_M = np.array([-25.0, -45.0, 20.0])  # default 3-D eye: from ahead, st
 HEALTH_SERIES = {"markers": "markers found", "reprojection_error_px": "reprojection [px]",
                  "frame_age_s": "frame age [s]"}
 AXIS_TITLES = {"dx": "Δx (to port) [m]", "dy": "Δy (astern) [m]", "dz": "Δz (up) [m]"}
+
+
+class LayoutSender:
+    """Sends a recording's successive layouts through one blueprint stream.
+
+    rerun-sdk 0.41's `send_blueprint` builds each layout in a new blueprint stream that is never freed (0.7-2.4 MB
+    a call; a superintendent whose drones swap cones would grow for six hours). This sender keeps one stream and
+    logs every layout into it at the next step of the "blueprint" timeline; each send drains it through a fresh
+    memory sink, which also repeats the store's info, so a segment file that receives a layout can open alone.
+    """
+
+    def __init__(self, application_id: str) -> None:
+        self._stream = rr.RecordingStream._from_native(bindings.new_blueprint(
+            application_id=application_id, make_default=False, make_thread_default=False, default_enabled=True))
+        self._step = 0
+
+    def send(self, rec: rr.RecordingStream, blueprint: rrb.Blueprint, make_active: bool = True,
+             make_default: bool = False) -> None:
+        """The layout to the recording's sinks (file and viewer), made active there."""
+        memory = self._stream.memory_recording()  # a new sink: it gets the store's info, then this layout
+        self._stream.set_time("blueprint", sequence=self._step)
+        blueprint._log_to_stream(self._stream)
+        self._stream.flush()
+        bindings.send_blueprint(memory.storage, make_active, make_default, recording=rec.to_native())
+        self._step += 1
 
 
 def analysis_blueprint(rig: Rig, with_truth: bool) -> rrb.Blueprint:

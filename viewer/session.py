@@ -24,7 +24,7 @@ from tracking.live import STALE_S, LiveUpdate
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
 from viewer.archive import ArchiveInputs
-from viewer.blueprint import analysis_blueprint
+from viewer.blueprint import LayoutSender, analysis_blueprint
 from viewer.playback import rerun_binary
 from viewer.recording import (
     APP_ID,
@@ -136,6 +136,7 @@ class Recorder:
         self._measured: Counter[tuple[str, str]] = Counter()  # (cone, camera) -> pair offsets
         self._cone_cameras: dict[str, str] = {}
         self._blueprint_sent = -np.inf
+        self._layouts: LayoutSender | None = None  # live: the superintendent's layout as cameras per cone change
         self._board_logged = -np.inf
         self._last_update: LiveUpdate | None = None
         self._estimates: list[ConeEstimate] = []  # not yet sent
@@ -293,11 +294,15 @@ class Recorder:
         log_topside_poses(self.rec, np.array(list(full)), np.array([np.mean(v, axis=0) for v in full.values()]))
 
     def on_update(self, update: LiveUpdate) -> None:
-        """Log a live update: its frames and estimates, then the superintendent's figures and camera table."""
-        for result in update.results:
-            self.on_frame(result)
-        for estimate in update.estimates:
-            self.on_estimate(estimate)
+        """Log a live update: its frames and estimates in capture-time order (each frame before the estimates it
+        gave, so both land in the segment that spans their time), then the superintendent's figures."""
+        order = sorted([(r.time, 0, k) for k, r in enumerate(update.results)]
+                       + [(e.time, 1, k) for k, e in enumerate(update.estimates)])
+        for _, kind, k in order:
+            if kind == 0:
+                self.on_frame(update.results[k])
+            else:
+                self.on_estimate(update.estimates[k])
         self._last_update = update
         self._compactor.poll()
         if update.now - self._board_logged >= BOARD_PERIOD_S:
@@ -329,7 +334,8 @@ class Recorder:
         first = self._blueprint_sent == -np.inf
         if first or (mapping != self._cone_cameras and (not self._cone_cameras
                                                          or now - self._blueprint_sent >= BLUEPRINT_MIN_PERIOD_S)):
-            self.rec.send_blueprint(superintendent_blueprint(self.rig, mapping), make_active=True, make_default=False)
+            self._layouts = self._layouts or LayoutSender(APP_ID)
+            self._layouts.send(self.rec, superintendent_blueprint(self.rig, mapping))
             self._cone_cameras = mapping
             self._blueprint_sent = now
 

@@ -31,8 +31,11 @@ def test_segments_each_open_on_their_own(live_run: Path) -> None:
     index = pd.read_csv(live_run / "live.segments.csv")
     assert len(index) >= 3  # 0.8 s of video in 0.25 s segments
     assert (index["start"].iloc[1:].to_numpy() >= index["end"].iloc[:-1].to_numpy() - 0.25).all()
-    for name in index["file"]:
+    for name, start, end in index[["file", "start", "end"]].itertuples(index=False):
         chunks = chunks_by_entity(live_run / name)
+        if "/offsets/dx/A/estimate" in chunks:  # estimates land in the segment that spans their capture time
+            times, _ = component_rows(chunks["/offsets/dx/A/estimate"], "Scalars:scalars")
+            assert not times.size or (start - 1e-6 <= times.min() and times.max() <= end + 1e-6)
         for cam in ("cam-ahead", "cam-port"):
             assert component_rows(chunks[f"/world/cameras/{cam}"], "Pinhole:image_from_camera")[1]  # static again
             _, keys = component_rows(chunks[f"/world/cameras/{cam}/image"], "VideoStream:is_keyframe")

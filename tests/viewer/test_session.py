@@ -178,3 +178,29 @@ def test_a_viewer_that_is_gone_neither_slows_nor_loses_the_recording(installatio
     chunks = chunks_by_entity(tmp_path / "run.rrd")
     times, _ = component_rows(chunks["/world/cameras/cam-port/image"], "EncodedImage:blob")
     assert len(times) == laps * sum(r.camera == "cam-port" for r in results)  # every frame in the file
+
+
+def test_a_live_update_lands_in_the_segments_that_span_its_times(installation: Path, tmp_path: Path) -> None:
+    """One update holding frames across a segment boundary, and their estimates: each in the file of its time."""
+    from tracking.filtering import ConeEstimate
+    from tracking.live import LiveUpdate
+    from tracking.pipeline import track_rig
+    from tracking.rig import load_rig
+    from viewer.session import Recorder
+
+    rig = load_rig(installation / "rig.yaml")
+    results = [r for _, r in zip(range(12), track_rig(rig, packets=True), strict=False)]
+    estimates = [ConeEstimate(r.time, "A", np.zeros(3), (r.camera,), np.eye(3) * 1e-4) for r in results]
+    recorder = Recorder(rig, tmp_path / "live.rrd", segment_s=0.1)
+    recorder.on_update(LiveUpdate(now=results[-1].time, results=results, estimates=estimates))
+    recorder.close()
+    index = pd.read_csv(tmp_path / "live.segments.csv")
+    assert len(index) >= 2
+    found = 0
+    for name, start, end in index[["file", "start", "end"]].itertuples(index=False):
+        chunks = chunks_by_entity(tmp_path / name)
+        if "/offsets/dx/A/estimate" in chunks:
+            times, _ = component_rows(chunks["/offsets/dx/A/estimate"], "Scalars:scalars")
+            assert not times.size or (start - 1e-6 <= times.min() and times.max() <= end + 1e-6), name
+            found += times.size
+    assert found == len(estimates)
