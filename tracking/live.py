@@ -44,6 +44,7 @@ STALE_S = 0.5  # an estimate whose newest measurement is older than this is show
 LATE_S = 0.1  # a frame this far behind the live clock is recorded but not searched, so the worker catches up
 WORKER_NICE = 5  # workers yield the cores to the main process, which then never falls behind them
 QUEUE_FRAMES = 64  # frames a worker may have in flight; in real time, newer frames replace what does not fit
+CREDIT_WAIT_S = 0.2  # a worker waiting for a credit checks this often whether it should stop
 START_DELAY_S = 0.5  # replay starts this long after every worker is ready
 EMA = 0.1  # smoothing of the frame-rate estimate
 
@@ -76,9 +77,11 @@ class LiveUpdate:
 
 
 def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: mp.Value, origin: mp.Value,
-                  speed: float, refinement: Refinement, realtime: bool, loop_until: float | None = None) -> None:
+                  speed: float, refinement: Refinement, realtime: bool, loop_until: float | None = None,
+                  credits: mp.Semaphore | None = None) -> None:
     """Process entry: track one camera until its source ends, stop is set or the main process is gone; reconnect
-    lost live sources."""
+    lost live sources. With credits (a replay flat out), each frame sent takes one, which the main process gives
+    back when it has fused the frame: a camera cannot run ahead of the slowest by more than its credits."""
     parent = mp.parent_process()
 
     def done() -> bool:
@@ -121,6 +124,9 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
                 result = tracker.skip(frame) if behind else tracker.process(frame)
                 if frame.packet is not None:  # the packet carries the image: do not ship the pixels
                     result = replace(result, frame=replace(frame, gray=None, bgr=None))
+                while credits is not None and not credits.acquire(timeout=CREDIT_WAIT_S):
+                    if done():
+                        return
                 out.put(result)
             if not live_source:
                 out.put(SourceEvent(name, CameraState.ENDED, time.time(), "end of file"))
@@ -139,7 +145,8 @@ class LiveTracker:
 
     def __init__(self, rig: Rig, speed: float = 1.0, refinement: Refinement = DEFAULT_REFINEMENT,
                  cameras: list[str] | None = None, tuning: FilterTuning | None = None,
-                 reorder_s: float = REORDER_S, loop_until: float | None = None) -> None:
+                 reorder_s: float = REORDER_S, loop_until: float | None = None, ahead_frames: int = QUEUE_FRAMES
+                 ) -> None:
         if rig.path is None:
             raise InputError("rig", "has no file (the workers read it)")
         self.rig = rig
@@ -160,16 +167,21 @@ class LiveTracker:
         self._t0 = self._ctx.Value("d", 0.0)
         self._origin = self._ctx.Value("d", 0.0)  # capture time at which a replay starts
         self._first_times: dict[str, float] = {}
+        # flat out, fusion waits for the slowest camera: the others get ahead_frames credits each, so the frames
+        # waiting for it stay bounded (in real time a frame waits at most reorder_s; a live source cannot wait)
+        self._credits = None if self.realtime else {n: self._ctx.Semaphore(ahead_frames) for n in self.names}
         self._workers: list[mp.process.BaseProcess] = []
         self._pending: list[tuple[float, int, FrameResult, float]] = []  # (time, seq, result, wall arrival)
         self._seq = 0
+        self._waiting: dict[str, int] = dict.fromkeys(self.names, 0)  # frames per camera in _pending
         self._newest = 0.0  # newest capture time released
 
     def __enter__(self) -> LiveTracker:
         for name in self.names:
             p = self._ctx.Process(target=camera_worker, name=f"camera-{name}", daemon=True,
                                   args=(self.rig.path, name, self._queue, self._stop, self._t0, self._origin,
-                                        self.speed, self.refinement, self.realtime, self.loop_until))
+                                        self.speed, self.refinement, self.realtime, self.loop_until,
+                                        self._credits[name] if self._credits else None))
             p.start()
             self._workers.append(p)
         return self
@@ -237,6 +249,7 @@ class LiveTracker:
             if h.state in (CameraState.LOST, CameraState.STARTING):
                 h.state, h.detail = CameraState.LIVE, ""
             heapq.heappush(self._pending, (item.time, self._seq, item, wall))
+            self._waiting[item.camera] += 1
             self._seq += 1
 
     def _watermark(self) -> float:
@@ -251,6 +264,9 @@ class LiveTracker:
         mark = self._watermark()
         while self._pending and (flush or self._pending[0][0] <= mark or wall - self._pending[0][3] >= self.reorder_s):
             t, _, result, _ = heapq.heappop(self._pending)
+            self._waiting[result.camera] -= 1
+            if self._credits is not None:
+                self._credits[result.camera].release()
             self._newest = max(self._newest, t)
             if self.realtime and result.tracked and self.now() - t > STALE_S:  # too old to show: the main process
                 result = replace(result, tracked=False)  # is behind; record the frame, skip its fusion, catch up
@@ -265,6 +281,8 @@ class LiveTracker:
     def _check_lost(self, wall: float, update: LiveUpdate) -> None:
         """A live camera silent for LOST_AFTER_S is lost (a hung stream sends no event)."""
         for h in self.health.values():
+            if self._credits is not None and self._waiting[h.name]:
+                continue  # silent because its frames wait here for a slower camera, and it for their credits
             if h.state == CameraState.LIVE and h.last_wall is not None and wall - h.last_wall > LOST_AFTER_S * (
                     1.0 if self.realtime else 10.0):
                 h.state, h.detail = CameraState.LOST, f"no frame for {wall - h.last_wall:.1f} s"

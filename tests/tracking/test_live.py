@@ -54,6 +54,29 @@ def test_flat_out_replay_equals_offline_fusion(installation: Path) -> None:
     assert all(h.frames == FRAMES for h in final.values())
 
 
+def test_a_camera_far_ahead_waits_for_the_slower_one(installation: Path, tmp_path: Path) -> None:
+    """Flat out, fusion waits for the camera furthest behind; one whose clock is 10 s ahead must not pile up its
+    whole file in memory meanwhile: it holds at most its credits."""
+    import yaml
+
+    rig_dict = yaml.safe_load((installation / "rig.yaml").read_text())
+    for cam in rig_dict["cameras"]:
+        cam["source"], cam["calibration"] = str(installation / cam["source"]), str(installation / cam["calibration"])
+        if cam["name"] == "cam-port":
+            cam["time_offset"] += 10.0
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(rig_dict, sort_keys=False))
+    ahead = 3
+    waiting = []
+    results = []
+    with LiveTracker(load_rig(tmp_path / "rig.yaml"), speed=math.inf, ahead_frames=ahead) as tracker:
+        for update in tracker.updates():
+            waiting.append(tracker._waiting["cam-port"])
+            results += update.results
+    assert len(results) == 2 * FRAMES  # nothing lost, nothing stuck
+    assert [r.time for r in results] == sorted(r.time for r in results)
+    assert 0 < max(waiting) <= ahead  # before credits: all 12 of its frames waited
+
+
 def test_real_time_replay_keeps_the_frame_rate(installation: Path) -> None:
     updates = run_live(installation / "rig.yaml", speed=1.0)
     results = [r for u in updates for r in u.results]
