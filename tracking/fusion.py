@@ -55,7 +55,7 @@ REPORT_WARMUP_S = 4.0  # for this long after the topside is placed, a cone is re
 REPORT_WARMUP_SIGMA_M = 0.025  # this: the first frames leave the cameras' swing about their markers poorly known
 # and not Gaussian, and errors of 3-4σ of a 25-50 mm σ were reported in the first second; the corners' errors
 # are correlated over seconds (a far marker's depth and tilt cues), so a σ of 30 mm at 3 s still hid 54 mm
-# (accuracy benchmark, fusion_diagnosis.md: the same errors shuffled in time give half the largest error)
+# (accuracy benchmark; fusion_diagnosis.md: in procedure 5 the same errors shuffled in time give half of it)
 JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate: edge-fit corners in fog and rain have a median error of 0.1 px
 CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
