@@ -3,7 +3,10 @@
 For every run (benchmarks/accuracy.py must have cached its renders and detections): the largest fused
 error, when it happens (and the largest after the first 3 s of estimates), the filter's own σ there,
 and the same filter given the simulator's true camera poses at every frame (a diagnosis only: the filter
-never reads the truth). Results: benchmarks/results/fusion_diagnosis.md.
+never reads the truth). Then the filter on two altered copies of the detected corners, which separate the
+size of the corner errors from their order in time: the same errors (detected minus true, truth_frames.csv)
+shuffled in time within each camera and marker, and the true corners plus white Gaussian noise of the
+errors' robust σ. Results: benchmarks/results/fusion_diagnosis.md.
 
 Run: .venv/bin/python benchmarks/fusion_diagnosis.py [--only config2-procedure5 ...]
 """
@@ -27,6 +30,9 @@ from tracking.rig import load_rig
 
 OUT = RESULTS.parent / "fusion_diagnosis.md"
 STARTUP_S = 3.0
+SEED = 0
+MAD_TO_SIGMA = 1.4826  # σ of a Gaussian from its median absolute deviation
+Detections = list[tuple[str, float, dict[int, np.ndarray]]]
 
 
 class TrueCameras(fusion.TopsideFilter):
@@ -50,6 +56,36 @@ class TrueCameras(fusion.TopsideFilter):
             self.P[:, b] = 0.0
             self.P[b, b] = 1e-12 * np.eye(fusion.STATE)
         return F
+
+
+def true_corners(scene: Path) -> dict[tuple[str, float, int], np.ndarray]:
+    """(camera, capture time rounded to ms, marker) -> the simulator's (4, 2) corners, distorted pixels."""
+    tf = pd.read_csv(scene / "truth_frames.csv").dropna(subset=["marker_id"])
+    corners = tf[[f"c{i}{a}" for i in range(4) for a in "xy"]].to_numpy().reshape(-1, 4, 2)
+    keys = zip(tf["camera"], tf["capture_time"].round(3), tf["marker_id"].astype(int), strict=True)
+    return dict(zip(keys, corners, strict=True))
+
+
+def altered(detections: Detections, truth: dict[tuple[str, float, int], np.ndarray], how: str) -> Detections:
+    """The detections with their corner errors shuffled in time per camera and marker ("shuffled"), or
+    replaced by white Gaussian noise of the errors' robust σ ("white")."""
+    rng = np.random.default_rng(SEED)
+    err = {(c, round(t, 3), i): np.asarray(z, float).reshape(4, 2) - truth[(c, round(t, 3), i)]
+           for c, t, found in detections for i, z in found.items()}
+    if how == "shuffled":
+        series: dict[tuple[str, int], list] = {}
+        for c, t, i in err:
+            series.setdefault((c, i), []).append((c, t, i))
+        new = {}
+        for keys in series.values():
+            for k, j in zip(keys, rng.permutation(len(keys)), strict=True):
+                new[k] = err[keys[j]]
+    else:
+        e = np.stack(list(err.values())).reshape(-1)
+        sigma = MAD_TO_SIGMA * float(np.median(np.abs(e - np.median(e))))
+        new = {k: rng.normal(0.0, sigma, (4, 2)) for k in err}
+    return [(c, t, {i: (truth[(c, round(t, 3), i)] + new[(c, round(t, 3), i)]).astype(np.float32)
+                    for i in found}) for c, t, found in detections]
 
 
 def errors(kf: fusion.TopsideFilter, measurements: list, truth: pd.DataFrame, monitored: list[str]) -> pd.DataFrame:
@@ -83,9 +119,12 @@ def main() -> None:
              "Fused (live) filter on the accuracy benchmark's runs (fog 50 %, rain 30 %, 15 FPS). Largest error "
              f"over the run and after the first {STARTUP_S:g} s of estimates, mm (axis, cone, capture time, and "
              "the error over the filter's own σ there); σ_e per axis; and the same filter given the simulator's "
-             "true camera poses (diagnosis only).", "",
-             "| run | largest | after the start | σ_e x/y/z [mm] | true cameras: largest | true cameras: σ_e |",
-             "| --- | --- | --- | ---: | --- | ---: |"]
+             "true camera poses (diagnosis only). Last two columns: the filter on the detected corner errors shuffled "
+             "in time (per camera and marker: same errors, no order) and on the true corners plus white noise of the "
+             "errors' robust σ.", "",
+             "| run | largest | after the start | σ_e x/y/z [mm] | true cameras: largest | true cameras: σ_e | "
+             "errors shuffled: largest | white noise: largest |",
+             "| --- | --- | --- | ---: | --- | ---: | --- | --- |"]
     for name in RUNS:
         if args.only is not None and name not in args.only:
             continue
@@ -93,19 +132,24 @@ def main() -> None:
         if not (scene / "detections.pkl").is_file():
             continue
         rig = with_mounts(load_rig(scene / "rig.yaml"), name)
-        measurements = measure(rig, pickle.loads((scene / "detections.pkl").read_bytes()))
+        detections = pickle.loads((scene / "detections.pkl").read_bytes())
+        measurements = measure(rig, detections)
         truth = pd.read_csv(scene / "truth.csv")
         monitored = sorted({p.cone for p in rig.all_pairs()})
         fused = errors(fusion.TopsideFilter(rig), measurements, truth, monitored)
         oracle = TrueCameras(rig)
         oracle.truth = truth
         exact = errors(oracle, measurements, truth, monitored)
+        corners = true_corners(scene)
+        shuffled, white = (errors(fusion.TopsideFilter(rig), measure(rig, altered(detections, corners, how)), truth,
+                                  monitored) for how in ("shuffled", "white"))
         late = fused[fused["time"] > fused["time"].min() + STARTUP_S]
 
         def sd(df: pd.DataFrame) -> str:
             return "/".join(f"{df[c].std() * 1e3:.1f}" for c in ("ex", "ey", "ez"))
 
-        lines.append(f"| {name} | {worst(fused)} | {worst(late)} | {sd(fused)} | {worst(exact)} | {sd(exact)} |")
+        lines.append(f"| {name} | {worst(fused)} | {worst(late)} | {sd(fused)} | {worst(exact)} | {sd(exact)} | "
+                     f"{worst(shuffled)} | {worst(white)} |")
         print(lines[-1], flush=True)
     OUT.write_text("\n".join(lines) + "\n")
 

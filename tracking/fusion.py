@@ -51,9 +51,11 @@ MEASUREMENT_FLOOR_M = 0.01  # σ added to every measured position: biases the co
 ROTATION_FLOOR_RAD = 1e-3  # σ added to every measured body rotation, for the same reasons
 REPORT_MAX_SIGMA_M = 0.05  # a cone whose offset σ exceeds this on any axis is reported as unknown (NaN):
 # 3σ must fit in the 150 mm concentricity tolerance for a number to be worth showing
-REPORT_WARMUP_S = 2.0  # for this long after the topside is placed, a cone is reported only when its σ is below
+REPORT_WARMUP_S = 4.0  # for this long after the topside is placed, a cone is reported only when its σ is below
 REPORT_WARMUP_SIGMA_M = 0.025  # this: the first frames leave the cameras' swing about their markers poorly known
-# and not Gaussian, and errors of 3-4σ of a 25-50 mm σ were reported in the first second (accuracy benchmark)
+# and not Gaussian, and errors of 3-4σ of a 25-50 mm σ were reported in the first second; the corners' errors
+# are correlated over seconds (a far marker's depth and tilt cues), so a σ of 30 mm at 3 s still hid 54 mm
+# (accuracy benchmark; fusion_diagnosis.md: in procedure 5 the same errors shuffled in time give half of it)
 JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate: edge-fit corners in fog and rain have a median error of 0.1 px
 CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
