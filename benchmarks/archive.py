@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 from mcap.reader import make_reader
 
+from benchmarks.report import write_results
 from tracking.fusion import ESTIMATORS
 from tracking.pipeline import FrameResult, track_rig
 from tracking.rig import load_rig
@@ -112,11 +113,7 @@ def main() -> None:
                      f"({report.messages / report.seconds / 1e3:.0f} k) | "
                      f"{size * 2 / 3 / 1e6 / recover_s:.0f} | {rec.messages} of {report.messages} | "
                      f"{channels_8 * 3600 * per_block / 1e6:.0f} MB |")
-    lines.append("")
-    text = "\n".join(lines)
-    print(text)
-    (REPO / "benchmarks" / "results").mkdir(parents=True, exist_ok=True)
-    (REPO / "benchmarks" / "results" / "archive.md").write_text(text)
+    write_results("archive", lines, echo=True)
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from benchmarks.report import write_results
 from tracking.filtering import paper_filter
 from tracking.pipeline import FrameResult, track_rig
 from tracking.rig import load_rig
@@ -92,10 +93,7 @@ def main() -> None:
         f"{mp4 / (n_cams * video_s / 60) * 60 / 1000:.2f} | — |",
         "",
     ]
-    text = "\n".join(lines)
-    print(text)
-    (REPO / "benchmarks" / "results").mkdir(parents=True, exist_ok=True)
-    (REPO / "benchmarks" / "results" / "recording.md").write_text(text)
+    write_results("recording", lines, echo=True)
 
 
 if __name__ == "__main__":

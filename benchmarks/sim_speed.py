@@ -17,13 +17,13 @@ import cv2
 from rich.console import Console
 from rich.table import Table
 
+from benchmarks.report import write_results
 from tracking.sim.builtins import builtin_scenario
 from tracking.sim.command import plan_frames, render_scenario
 from tracking.sim.render import CameraRenderer
 from tracking.sim.world import World
 
 SCENARIOS = ("config2-procedure5-clear", "config2-procedure5", "config2-procedure5-weather", "config1-procedure3")
-RESULTS = Path(__file__).resolve().parent / "results" / "sim_speed.md"
 
 
 def render_only(name: str, seconds: float) -> tuple[int, float]:
@@ -78,9 +78,7 @@ def main() -> None:
              "\"whole command\" includes world set-up, truth logs and H.264 encoding (veryfast, CRF 20).\n",
              "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text("\n".join(lines) + "\n")
-    print(f"wrote {RESULTS}")
+    write_results("sim_speed", lines)
 
 
 if __name__ == "__main__":

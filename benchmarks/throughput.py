@@ -29,6 +29,7 @@ from pathlib import Path
 import cv2
 import yaml
 
+from benchmarks.report import write_results
 from benchmarks.scenes import FPS, render_scene
 from tracking.cli import LIVE_ESTIMATE_PERIOD_S
 from tracking.detection import DEFAULT_REFINEMENT
@@ -39,8 +40,6 @@ from tracking.pipeline import CameraTracker
 from tracking.rig import load_rig
 from viewer.session import Recorder
 
-REPO = Path(__file__).resolve().parents[1]
-RESULTS = REPO / "benchmarks" / "results" / "throughput.md"
 SCENARIO = "config2-setdown-weather"
 RESOLUTIONS = {"920×600": (920, 600), "1920×1080": (1920, 1080)}
 STAGES = ("decode", "detection (search and edge fit)", "poses, pair offsets, body observations", "fusion",
@@ -205,8 +204,7 @@ def write(rows: list[tuple], costs: dict[str, dict[str, float]], args: argparse.
               "| 8 × 15 FPS would need, ms per frame at most | " + " | ".join("16.67" for _ in labels) + " |",
               "| 3× plain (its frames/s above) would need, ms per frame at most | "
               + " | ".join(f"{2000 / (3 * costs[k]['plain frames/s']):.2f}" for k in labels) + " |"]
-    RESULTS.write_text("\n".join(lines) + "\n")
-    print(f"wrote {RESULTS}")
+    write_results("throughput", lines)
 
 
 if __name__ == "__main__":

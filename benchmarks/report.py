@@ -1,0 +1,19 @@
+"""Writing a benchmark's results: a markdown file in benchmarks/results/."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+
+
+def write_results(name: str, lines: list[str], echo: bool = False) -> Path:
+    """benchmarks/results/<name>.md from the table's lines (printed too with echo); its path."""
+    text = "\n".join(lines).rstrip("\n") + "\n"
+    if echo:
+        print(text)
+    RESULTS_DIR.mkdir(parents=True, exist_ok=True)
+    path = RESULTS_DIR / f"{name}.md"
+    path.write_text(text)
+    print(f"wrote {path}")
+    return path
