@@ -44,7 +44,7 @@ STALE_S = 0.5  # an estimate whose newest measurement is older than this is show
 LATE_S = 0.1  # a frame this far behind the live clock is recorded but not searched, so the worker catches up
 WORKER_NICE = 5  # workers yield the cores to the main process, which then never falls behind them
 QUEUE_FRAMES = 64  # frames a worker may have in flight; in real time, newer frames replace what does not fit
-CREDIT_WAIT_S = 0.2  # a worker waiting for a credit checks this often whether it should stop
+WAIT_S = 0.2  # a worker waiting for a credit or for room in the queue checks this often whether it should stop
 START_DELAY_S = 0.5  # replay starts this long after every worker is ready
 EMA = 0.1  # smoothing of the frame-rate estimate
 
@@ -91,13 +91,25 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
             return True
         return stop.is_set()
 
+    def send(item: object) -> bool:
+        """Put an item on the queue, waiting for room (a slow main process) but not for a main process that is
+        gone; False when the worker should stop."""
+        while True:
+            try:
+                out.put(item, timeout=WAIT_S)
+                return True
+            except queue.Full:
+                if done():
+                    return False
+
     rig = load_rig(rig_path)
     entry = next(c for c in rig.cameras if c.name == name)
     cv2.setNumThreads(1)  # one process per camera already uses every core
     if hasattr(os, "nice"):
         os.nice(WORKER_NICE)  # when the cores are short, the main process (fusion, the live view) goes first
     tracker = CameraTracker.from_rig(rig, entry, refinement, packets=True, roi_tracking=True)
-    out.put(SourceEvent(name, CameraState.STARTING, time.time(), "ready", first_capture_time(rig, entry)))
+    if not send(SourceEvent(name, CameraState.STARTING, time.time(), "ready", first_capture_time(rig, entry))):
+        return
     while t0.value == 0.0 and not done():
         time.sleep(0.01)
     pacer = Pacer(t0.value, speed, origin.value)
@@ -117,25 +129,29 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
                 frozen = freeze.frozen(frame)
                 if frozen != (state == CameraState.FROZEN) or state == CameraState.STARTING:
                     state = CameraState.FROZEN if frozen else CameraState.LIVE
-                    out.put(SourceEvent(name, state, time.time(), "the image does not change" if frozen else ""))
+                    if not send(SourceEvent(name, state, time.time(), "the image does not change" if frozen else "")):
+                        return
                 if frozen:
                     continue  # a frozen image re-stamped with new times would be a false measurement
                 behind = realtime and lateness(frame.time) > LATE_S
                 result = tracker.skip(frame) if behind else tracker.process(frame)
                 if frame.packet is not None:  # the packet carries the image: do not ship the pixels
                     result = replace(result, frame=replace(frame, gray=None, bgr=None))
-                while credits is not None and not credits.acquire(timeout=CREDIT_WAIT_S):
+                while credits is not None and not credits.acquire(timeout=WAIT_S):
                     if done():
                         return
-                out.put(result)
+                if not send(result):
+                    return
             if not live_source:
-                out.put(SourceEvent(name, CameraState.ENDED, time.time(), "end of file"))
+                send(SourceEvent(name, CameraState.ENDED, time.time(), "end of file"))
                 return
-            out.put(SourceEvent(name, CameraState.LOST, time.time(), "stream ended; reconnecting"))
+            if not send(SourceEvent(name, CameraState.LOST, time.time(), "stream ended; reconnecting")):
+                return
         except InputError as exc:
-            out.put(SourceEvent(name, CameraState.LOST, time.time(), f"{exc}; reconnecting"))
+            if not send(SourceEvent(name, CameraState.LOST, time.time(), f"{exc}; reconnecting")):
+                return
             if not live_source:
-                out.put(SourceEvent(name, CameraState.ENDED, time.time(), str(exc)))
+                send(SourceEvent(name, CameraState.ENDED, time.time(), str(exc)))
                 return
         stop.wait(RECONNECT_S)
 

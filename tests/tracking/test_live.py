@@ -178,16 +178,22 @@ def test_a_stream_that_ends_is_lost_then_taken_back(http_streams: Path) -> None:
 
 
 ORPHAN_SCRIPT = """
-import sys
+import sys, time
 from pathlib import Path
+import tracking.live
 from tracking.live import LiveTracker
 from tracking.rig import load_rig
 if __name__ == "__main__":
+    stall = sys.argv[2] == "stall"
+    if stall:
+        tracking.live.QUEUE_FRAMES = 1  # the queue is full at once when nobody reads it
     with LiveTracker(load_rig(Path(sys.argv[1])), speed=1.0, loop_until=600.0) as tracker:
         for update in tracker.updates():
             if update.results:
                 print(*[p.pid for p in tracker._workers], flush=True)
                 break
+        if stall:
+            time.sleep(600)  # a main process that stopped reading: the workers wait on a full queue
         for update in tracker.updates():
             pass
 """
@@ -202,13 +208,18 @@ def running(pid: int) -> bool:
         return False
 
 
-def test_workers_end_when_the_main_process_is_killed(installation: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("main_state", ["reading", "stall"])
+def test_workers_end_when_the_main_process_is_killed(installation: Path, tmp_path: Path, main_state: str) -> None:
+    """Killed while reading, or while the workers wait on a full queue (a slow main process): none lives on,
+    holding its camera."""
     script = tmp_path / "orphan.py"
     script.write_text(ORPHAN_SCRIPT)
-    main = subprocess.Popen([sys.executable, str(script), str(installation / "rig.yaml")], stdout=subprocess.PIPE,
-                            text=True, cwd=Path(__file__).resolve().parents[2])
+    main = subprocess.Popen([sys.executable, str(script), str(installation / "rig.yaml"), main_state],
+                            stdout=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[2])
     pids = [int(p) for p in main.stdout.readline().split()]
     assert len(pids) == 2 and all(running(p) for p in pids)
+    if main_state == "stall":
+        time.sleep(1.0)  # 15 frames per camera and second: the 2-frame queue is long full
     main.send_signal(signal.SIGKILL)  # no clean-up runs: the workers must notice on their own
     main.wait()
     deadline = time.monotonic() + 10.0
