@@ -320,6 +320,17 @@ class CameraMotionLevel:
         return k if k == 0 or (k < len(times) and times[k] - t < t - times[k - 1]) else k - 1
 
 
+def cone_points(rig: Rig) -> dict[str, np.ndarray]:
+    """The point (3,) whose offset is each cone's: its tip in the rig, else the centre of its pair's topside marker
+    (topside frame, which is the jacket frame when mated)."""
+    points = {c: np.array(p, dtype=float) for c, p in rig.cones.items()}
+    markers = rig.marker_by_id
+    for pair in rig.all_pairs():
+        if pair.cone not in points:
+            points[pair.cone] = np.array(markers[pair.topside].center, dtype=float)
+    return points
+
+
 @dataclass
 class TopsideFilter:
     """The Kalman filter of one installation: the topside and every camera of the rig."""
@@ -350,10 +361,7 @@ class TopsideFilter:
                                 for i, T in geometry.topside.items()}
         markers = self.rig.marker_by_id
         self.topside_points = {m.id: np.array(m.center) for m in markers.values() if m.body == "topside"}
-        self.cones = {c: np.array(p) for c, p in self.rig.cones.items()}
-        for pair in self.rig.all_pairs():  # a cone without a tip in the rig: use its topside markers
-            if pair.cone not in self.cones:
-                self.cones[pair.cone] = self.topside_points[pair.topside]
+        self.cones = cone_points(self.rig)
 
     def _reset_camera(self, cam: CameraState, covariance: np.ndarray | None = None) -> None:
         """Forget a camera: its block decoupled, its pose covariance given (or unit), its rates' prior."""

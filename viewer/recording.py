@@ -23,6 +23,7 @@ import rerun as rr
 
 from tracking.camera import CameraModel
 from tracking.filtering import ConeEstimate
+from tracking.fusion import point_offset_matrix
 from tracking.images import Frame
 from tracking.pipeline import FrameResult
 from tracking.pose import Choice, MarkerPose
@@ -215,11 +216,33 @@ def log_estimates(rec: rr.RecordingStream, estimates: list[ConeEstimate],
                 send_scalars(rec, f"errors/{axis}/{cone}", times, offsets[:, k] - truth[:, k])
 
 
-def log_topside_poses(rec: rr.RecordingStream, times: np.ndarray, translations: np.ndarray) -> None:
-    """T_jacket_topside (N, 3) over time: the mean translation of the cones (rotation is not logged yet)."""
+def topside_pose(cones: dict[str, np.ndarray], offsets: dict[str, np.ndarray]) -> np.ndarray:
+    """T_jacket_topside (4, 4) that moves each cone's point (3,) by its offset (3,): with three cones or more not in
+    a line, the least-squares small rotation ω and translation t of o = t + ω × r (the fused filter's own model,
+    so its cone offsets give back its pose); with fewer, the mean offset and no rotation."""
+    names = [c for c in offsets if c in cones]
+    T = np.eye(4)
+    if not names:
+        return T
+    o = np.array([offsets[c] for c in names], dtype=float)
+    r = np.array([cones[c] for c in names], dtype=float)
+    A = np.concatenate([point_offset_matrix(p)[:, :6] for p in r])  # o = A [t, ω]
+    if len(names) >= 3 and np.linalg.matrix_rank(A, tol=1e-6 * max(1.0, float(np.abs(r).max()))) == 6:
+        t, omega = np.split(np.linalg.lstsq(A, o.reshape(-1), rcond=None)[0], 2)
+        T[:3, :3] = cv2.Rodrigues(omega)[0]
+        T[:3, 3] = t
+    else:
+        T[:3, 3] = o.mean(axis=0)
+    return T
+
+
+def log_topside_poses(rec: rr.RecordingStream, times: np.ndarray, T_jacket_topside: np.ndarray) -> None:
+    """The topside's pose over time, (N, 4, 4) at (N,) capture times: its markers below it follow."""
     if len(times):
         rr.send_columns("world/topside", indexes=[time_column(times)],
-                        columns=rr.Transform3D.columns(translation=translations), recording=rec)
+                        columns=rr.Transform3D.columns(translation=T_jacket_topside[:, :3, 3],
+                                                       quaternion=quaternions_xyzw(T_jacket_topside[:, :3, :3])),
+                        recording=rec)
 
 
 def log_estimate_records(rec: rr.RecordingStream, estimates: list[ConeEstimate]) -> None:

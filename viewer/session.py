@@ -19,6 +19,7 @@ import rerun.blueprint as rrb
 from tracking.camera import CameraModel, load_camera
 from tracking.evaluate import truth_at
 from tracking.filtering import ConeEstimate
+from tracking.fusion import cone_points
 from tracking.images import Frame
 from tracking.live import STALE_S, LiveUpdate
 from tracking.pipeline import FrameResult
@@ -44,6 +45,7 @@ from viewer.recording import (
     log_truth,
     log_video_codec,
     set_capture_time,
+    topside_pose,
 )
 from viewer.superintendent import (
     cone_reading,
@@ -121,6 +123,7 @@ class Recorder:
             flush_tick=BATCH_TICK_S, flush_num_bytes=BATCH_BYTES))
         self.cameras: dict[str, CameraModel] = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
         self.cones = sorted({p.cone for p in rig.all_pairs()} | set(rig.cones))
+        self._cone_points = cone_points(rig)  # where each cone's offset applies, as the filter has it
         self.status = StatusBoard()
         self._truth_cones = {c[len("cone_"):-len("_dx")] for c in truth.columns
                              if c.startswith("cone_") and c.endswith("_dx")} if truth is not None else set()
@@ -287,11 +290,12 @@ class Recorder:
                 truth[rows] = truth_at(self.truth, cone, np.array([batch[i].time for i in rows]))
         log_estimates(self.rec, batch, truth)
         log_estimate_records(self.rec, batch)
-        full: dict[float, list[np.ndarray]] = {}
+        full: dict[float, dict[str, np.ndarray]] = {}
         for e in batch:
             if np.all(np.isfinite(e.offset)):
-                full.setdefault(e.time, []).append(e.offset)
-        log_topside_poses(self.rec, np.array(list(full)), np.array([np.mean(v, axis=0) for v in full.values()]))
+                full.setdefault(e.time, {})[e.cone] = e.offset
+        log_topside_poses(self.rec, np.array(list(full)),
+                          np.array([topside_pose(self._cone_points, v) for v in full.values()]).reshape(-1, 4, 4))
 
     def on_update(self, update: LiveUpdate) -> None:
         """Log a live update: its frames and estimates in capture-time order (each frame before the estimates it
