@@ -7,7 +7,7 @@ Channels (Foxglove schemas in protobuf encoding, log time = capture time):
     /cameras/<camera>/health         topside.CameraHealth: markers, reprojection error, frame interval
     /frames/markers                  foxglove.FrameTransforms jacket -> marker_<id>, topside -> marker_<id>
     /frames/cameras                  foxglove.FrameTransforms jacket -> <camera> as the markers place it
-    /frames/topside                  foxglove.FrameTransforms jacket -> topside (mean of the cone offsets)
+    /frames/topside                  foxglove.FrameTransforms jacket -> topside (fitted to the cone offsets)
     /offsets/<cone>                  topside.ConeOffset: dx dy dz, 1σ, covariance (3x3, m²), status, cameras
     /truth/<cone>                    topside.ConeOffset: the simulator's truth, when known
     /log                             foxglove.Log: events (start, first frame, markers lost/found, cone state)
@@ -54,6 +54,7 @@ from mcap_protobuf.schema import build_file_descriptor_set
 
 from tracking.camera import CameraModel
 from tracking.filtering import ConeEstimate
+from tracking.fusion import cone_points
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
 from viewer.manifest import (
@@ -76,6 +77,7 @@ from viewer.recording import (
     cone_state,
     encode_jpeg,
     marker_axes_px,
+    topside_pose,
 )
 
 PROFILE = "topside"
@@ -489,6 +491,7 @@ class Archive:
         self.video = video
         self._encoders: dict[str, VideoEncoder] = {}
         self.rig = rig
+        self._cone_points = cone_points(rig)
         self.inputs = inputs
         self.cameras = dict(cameras)
         self.key = key
@@ -593,10 +596,10 @@ class Archive:
             self.file.write("/log", log_message(ns, f"cone {estimate.cone}: {state}", level), ns)
             self._cone_state[estimate.cone] = state
         self._latest[estimate.cone] = estimate.offset
-        full = [o for o in self._latest.values() if np.all(np.isfinite(o))]
+        full = {c: o for c, o in self._latest.items() if np.all(np.isfinite(o))}
         if full:
-            T = np.eye(4)
-            T[:3, 3] = as_f32(np.mean(full, axis=0))
+            T = topside_pose(self._cone_points, full)  # as the .rrd's world/topside
+            T[:3, :] = as_f32(T[:3, :])
             self.file.write("/frames/topside", FrameTransforms(transforms=[transform("jacket", "topside", T, ns)]), ns)
 
     def close(self, offsets_csv: bytes | None = None) -> dict:
