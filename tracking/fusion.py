@@ -62,7 +62,6 @@ CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's var
 # (1-4 % of corners are > 1 px off in rain: a heavy tail a Gaussian would follow)
 CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a hovering drone's jitter and a
 # vessel's wave motion turn within a second or two, so a camera never drifts on at the speed it had
-ADAPTIVE_MOTION = True  # cameras on rigid mounts get the process noise their own images show (CameraMotionLevel)
 MOTION_LAG_S = 1.0  # lag of the second differences of jacket-marker image positions that measure a camera's motion
 MOTION_SAMPLES = 60  # second differences (per marker and image axis) whose median gives the camera's motion level
 MOTION_MIN_SAMPLES = 12  # until then the mount's motion prior is used as it stands
@@ -121,13 +120,6 @@ def rate_decay(dt: float, tau: float) -> tuple[float, float]:
         return 1.0, dt
     a = float(np.exp(-dt / tau))
     return a, tau * (1.0 - a)
-
-
-def transition(dt: float, blocks: int = 1, taus: list[float] | None = None) -> np.ndarray:
-    """(12 B, 12 B) transition of B bodies over dt seconds: constant velocity, or rates reverting to zero
-    with the time constants taus (one per body, inf for constant velocity)."""
-    ab = np.array([rate_decay(dt, np.inf if taus is None else tau) for tau in (taus or [np.inf] * blocks)])
-    return _transition(np.repeat(ab[:, 0], 6), np.repeat(ab[:, 1], 6))
 
 
 def _transition(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -411,7 +403,7 @@ class TopsideFilter:
     def _measure_motion(self, cam: CameraState, time: float, jacket: dict[int, np.ndarray], K: np.ndarray) -> None:
         """A frame's jacket corners into the camera's motion level; its process noise scaled to that level."""
         prior = self.tuning.motion(cam.mount)
-        if not ADAPTIVE_MOTION or not prior.adapts or not jacket:
+        if not prior.adapts or not jacket:
             return
         cam.motion.add(time, jacket, float(K[0, 0] + K[1, 1]) / 2)
         if cam.motion.level is not None:
@@ -668,15 +660,17 @@ class TopsideFilter:
 
     def cone_estimates(self, x: np.ndarray | None = None, P: np.ndarray | None = None,
                        time: float | None = None, cameras: tuple[str, ...] | None = None) -> list[ConeEstimate]:
-        """Offset and covariance at every cone from a state (default: the current one)."""
+        """Offset and covariance at every cone from a state (default: the current one, reported as the live filter
+        does, withholding wide cones while it warms up; a given state, the smoother's, has seen the whole run)."""
+        live = x is None
         x = self.x if x is None else x
         P = self.P if P is None else P
         assert x is not None and P is not None
         time = self.time if time is None else time
         cameras = self.contributing() if cameras is None else cameras
         limit = REPORT_MAX_SIGMA_M
-        if x is self.x and (self.placed_at is None or time - self.placed_at < REPORT_WARMUP_S):
-            limit = REPORT_WARMUP_SIGMA_M  # the live filter warming up (the smoother has seen it all)
+        if live and (self.placed_at is None or time - self.placed_at < REPORT_WARMUP_S):
+            limit = REPORT_WARMUP_SIGMA_M
         out = []
         for cone, r in sorted(self.cones.items()):
             H = point_offset_matrix(r)

@@ -91,9 +91,12 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
             return True
         return stop.is_set()
 
-    def send(item: object) -> bool:
-        """Put an item on the queue, waiting for room (a slow main process) but not for a main process that is
-        gone; False when the worker should stop."""
+    def send(item: object, credit: mp.Semaphore | None = None) -> bool:
+        """Put an item on the queue, first taking a credit when given, waiting for either (a slower camera, a slow
+        main process) but not for a main process that is gone; False when the worker should stop."""
+        while credit is not None and not credit.acquire(timeout=WAIT_S):
+            if done():
+                return False
         while True:
             try:
                 out.put(item, timeout=WAIT_S)
@@ -137,10 +140,7 @@ def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: 
                 result = tracker.skip(frame) if behind else tracker.process(frame)
                 if frame.packet is not None:  # the packet carries the image: do not ship the pixels
                     result = replace(result, frame=replace(frame, gray=None, bgr=None))
-                while credits is not None and not credits.acquire(timeout=WAIT_S):
-                    if done():
-                        return
-                if not send(result):
+                if not send(result, credits):
                     return
             if not live_source:
                 send(SourceEvent(name, CameraState.ENDED, time.time(), "end of file"))
@@ -189,7 +189,6 @@ class LiveTracker:
         self._workers: list[mp.process.BaseProcess] = []
         self._pending: list[tuple[float, int, FrameResult, float]] = []  # (time, seq, result, wall arrival)
         self._seq = 0
-        self._waiting: dict[str, int] = dict.fromkeys(self.names, 0)  # frames per camera in _pending
         self._newest = 0.0  # newest capture time released
 
     def __enter__(self) -> LiveTracker:
@@ -265,7 +264,6 @@ class LiveTracker:
             if h.state in (CameraState.LOST, CameraState.STARTING):
                 h.state, h.detail = CameraState.LIVE, ""
             heapq.heappush(self._pending, (item.time, self._seq, item, wall))
-            self._waiting[item.camera] += 1
             self._seq += 1
 
     def _watermark(self) -> float:
@@ -280,7 +278,6 @@ class LiveTracker:
         mark = self._watermark()
         while self._pending and (flush or self._pending[0][0] <= mark or wall - self._pending[0][3] >= self.reorder_s):
             t, _, result, _ = heapq.heappop(self._pending)
-            self._waiting[result.camera] -= 1
             if self._credits is not None:
                 self._credits[result.camera].release()
             self._newest = max(self._newest, t)
@@ -296,8 +293,9 @@ class LiveTracker:
 
     def _check_lost(self, wall: float, update: LiveUpdate) -> None:
         """A live camera silent for LOST_AFTER_S is lost (a hung stream sends no event)."""
+        waiting = {r.camera for _, _, r, _ in self._pending} if self._credits is not None else set()
         for h in self.health.values():
-            if self._credits is not None and self._waiting[h.name]:
+            if h.name in waiting:
                 continue  # silent because its frames wait here for a slower camera, and it for their credits
             if h.state == CameraState.LIVE and h.last_wall is not None and wall - h.last_wall > LOST_AFTER_S * (
                     1.0 if self.realtime else 10.0):

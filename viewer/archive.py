@@ -77,6 +77,7 @@ from viewer.recording import (
     cone_state,
     encode_jpeg,
     marker_axes_px,
+    quaternions_xyzw,
     topside_pose,
 )
 
@@ -146,11 +147,8 @@ def color(rgb: tuple[int, int, int]) -> Color:
 
 
 def transform(parent: str, child: str, T: np.ndarray, ns: int) -> FrameTransform:
-    """T_parent_child (4, 4) as a FrameTransform (quaternion through OpenCV's Rodrigues)."""
-    rvec = cv2.Rodrigues(np.asarray(T[:3, :3], dtype=np.float64))[0].reshape(3)
-    angle = float(np.linalg.norm(rvec))
-    axis = rvec / angle if angle > 0 else np.zeros(3)
-    q = np.r_[axis * np.sin(angle / 2), np.cos(angle / 2)]
+    """T_parent_child (4, 4) as a FrameTransform."""
+    q = quaternions_xyzw(T[None, :3, :3])[0]
     ft = FrameTransform(timestamp=stamp(ns), parent_frame_id=parent, child_frame_id=child)
     ft.translation.x, ft.translation.y, ft.translation.z = (float(v) for v in T[:3, 3])
     ft.rotation.x, ft.rotation.y, ft.rotation.z, ft.rotation.w = (float(v) for v in q)

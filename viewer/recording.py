@@ -227,8 +227,9 @@ def topside_pose(cones: dict[str, np.ndarray], offsets: dict[str, np.ndarray]) -
     o = np.array([offsets[c] for c in names], dtype=float)
     r = np.array([cones[c] for c in names], dtype=float)
     A = np.concatenate([point_offset_matrix(p)[:, :6] for p in r])  # o = A [t, ω]
-    if len(names) >= 3 and np.linalg.matrix_rank(A, tol=1e-6 * max(1.0, float(np.abs(r).max()))) == 6:
-        t, omega = np.split(np.linalg.lstsq(A, o.reshape(-1), rcond=None)[0], 2)
+    solution, _, rank, _ = np.linalg.lstsq(A, o.reshape(-1), rcond=1e-6)
+    if rank == 6:  # three cones or more, not in a line
+        t, omega = np.split(solution, 2)
         T[:3, :3] = cv2.Rodrigues(omega)[0]
         T[:3, 3] = t
     else:

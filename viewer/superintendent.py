@@ -18,6 +18,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from tracking.filtering import ConeEstimate
+from tracking.fusion import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_M
 from tracking.live import STALE_S, CameraHealth
 from tracking.rig import Rig
 from tracking.sources import CameraState
@@ -89,7 +90,9 @@ def cone_markdown(reading: ConeReading, stale_s: float = STALE_S) -> str:
         elif reading.age > stale_s:
             why = f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)"
         else:
-            why = "the cameras do not see this cone well enough (1σ above 50 mm; 25 mm before its first figure)"
+            why = ("the cameras do not see this cone well enough (1σ above "
+                   f"{REPORT_MAX_SIGMA_M * 1e3:.0f} mm; {REPORT_WARMUP_SIGMA_M * 1e3:.0f} mm in the first "
+                   f"{REPORT_WARMUP_S:g} s after the topside is placed)")
         return f"{headline}\n# NO DATA\n\n{why}"
     dx, dy, dz = reading.offset
     return (f"{headline}\n"

@@ -70,7 +70,7 @@ def test_a_camera_far_ahead_waits_for_the_slower_one(installation: Path, tmp_pat
     results = []
     with LiveTracker(load_rig(tmp_path / "rig.yaml"), speed=math.inf, ahead_frames=ahead) as tracker:
         for update in tracker.updates():
-            waiting.append(tracker._waiting["cam-port"])
+            waiting.append(sum(r.camera == "cam-port" for _, _, r, _ in tracker._pending))  # held for fusion
             results += update.results
     assert len(results) == 2 * FRAMES  # nothing lost, nothing stuck
     assert [r.time for r in results] == sorted(r.time for r in results)
