@@ -6,7 +6,11 @@ and the same filter given the simulator's true camera poses at every frame (a di
 never reads the truth). Then the filter on two altered copies of the detected corners, which separate the
 size of the corner errors from their order in time: the same errors (detected minus true, truth_frames.csv)
 shuffled in time within each camera and marker, and the true corners plus white Gaussian noise of the
-errors' robust σ. Results: benchmarks/results/fusion_diagnosis.md.
+errors' robust σ. Then how honest the filter's σ is (the share of errors beyond 2σ and 3σ: 4.6 % and 0.3 % for a
+Gaussian), and, at the largest error, what one frame of each camera alone measures along that axis at that cone
+(the σ from its own jacket and topside corners, with the topside and that camera free): a camera that sees one far
+jacket marker barely fixes its swing about it, and the swing moves a topside marker at another depth sideways.
+Results: benchmarks/results/fusion_diagnosis.md.
 
 Run: .venv/bin/python benchmarks/fusion_diagnosis.py [--only config2-procedure5 ...]
 """
@@ -32,6 +36,8 @@ OUT = RESULTS.parent / "fusion_diagnosis.md"
 STARTUP_S = 3.0
 SEED = 0
 MAD_TO_SIGMA = 1.4826  # σ of a Gaussian from its median absolute deviation
+ONE_FRAME_PRIOR = (1.0,) * 3 + (0.05,) * 3 + (1.0,) * 6  # m, rad: topside t, ω (the filter's rotation prior),
+# then the camera's rotation and position: free
 Detections = list[tuple[str, float, dict[int, np.ndarray]]]
 
 
@@ -99,6 +105,49 @@ def errors(kf: fusion.TopsideFilter, measurements: list, truth: pd.DataFrame, mo
     return pd.DataFrame(rows, columns=["time", "cone", "ex", "ey", "ez", "sx", "sy", "sz"])
 
 
+def consistency(df: pd.DataFrame) -> str:
+    """Share of errors (every axis) beyond 2σ and 3σ of the filter's own σ, %."""
+    z = np.abs(df[["ex", "ey", "ez"]].to_numpy() / df[["sx", "sy", "sz"]].to_numpy())
+    return f"{100 * (z > 2).mean():.1f} / {100 * (z > 3).mean():.2f}"
+
+
+def one_frame_sigmas(rig, measurements: list, df: pd.DataFrame) -> str:
+    """At the largest error: σ (mm) of that cone's offset along that axis from one frame of each camera alone, its
+    last frame before then (its jacket and topside corners; the topside and the camera free, linearised at the
+    filter's state there)."""
+    e = df[["ex", "ey", "ez"]].abs().to_numpy()
+    i, axis = np.unravel_index(np.argmax(e), e.shape)
+    when, cone = df.iloc[i].time, df.iloc[i].cone
+    kf = fusion.TopsideFilter(rig)
+    last: dict[str, fusion.BodyObservation] = {}
+    for group in fusion._frames(measurements):
+        if group[0].time > when:
+            break
+        fusion.filter_frame(kf, group)
+        last.update({m.camera: m for m in group if isinstance(m, fusion.BodyObservation)})
+    c = fusion.point_offset_matrix(kf.cones[cone])[axis, :6]
+    out = []
+    for name, o in sorted(last.items()):
+        cam = kf.cameras[name]
+        if cam.T_jacket_camera is None or not kf.topside_placed:
+            continue
+        columns = [*range(6), *range(cam.index, cam.index + 6)]
+        rows = []
+        for marker in o.corners:
+            h = kf._predict_corners(cam, marker, kf.x, o.K)
+            H = np.zeros((8, len(columns)))
+            for j, k in enumerate(columns):
+                x1 = kf.x.copy()
+                x1[k] += fusion.JACOBIAN_STEP
+                H[:, j] = (kf._predict_corners(cam, marker, x1, o.K) - h) / fusion.JACOBIAN_STEP
+            rows.append(H)
+        H = np.vstack(rows)
+        info = H.T @ H / fusion.CORNER_NOISE_PX**2 + np.diag(1.0 / np.square(ONE_FRAME_PRIOR))
+        cov = np.linalg.inv(info)[:6, :6]
+        out.append(f"{name} {np.sqrt(c @ cov @ c) * 1e3:.0f}")
+    return ", ".join(out) or "—"
+
+
 def worst(df: pd.DataFrame) -> str:
     """The largest error: mm, axis, cone, time, and |e|/σ there."""
     if df.empty:
@@ -119,12 +168,15 @@ def main() -> None:
              "Fused (live) filter on the accuracy benchmark's runs (fog 50 %, rain 30 %, 15 FPS). Largest error "
              f"over the run and after the first {STARTUP_S:g} s of estimates, mm (axis, cone, capture time, and "
              "the error over the filter's own σ there); σ_e per axis; and the same filter given the simulator's "
-             "true camera poses (diagnosis only). Last two columns: the filter on the detected corner errors shuffled "
-             "in time (per camera and marker: same errors, no order) and on the true corners plus white noise of the "
-             "errors' robust σ.", "",
+             "true camera poses (diagnosis only). Then the filter on the detected corner errors shuffled in time (per "
+             "camera and marker: same errors, no order) and on the true corners plus white noise of the errors' robust "
+             "σ. Last, the share of errors beyond 2σ / 3σ of the filter's own σ (a Gaussian: 4.6 / 0.27 %), and at "
+             "the largest error, the σ along its axis at its cone from one frame of each camera alone (its last frame "
+             "before then; its own jacket and topside corners, the topside and that camera free).", "",
              "| run | largest | after the start | σ_e x/y/z [mm] | true cameras: largest | true cameras: σ_e | "
-             "errors shuffled: largest | white noise: largest |",
-             "| --- | --- | --- | ---: | --- | ---: | --- | --- |"]
+             "errors shuffled: largest | white noise: largest | beyond 2σ / 3σ [%] | one frame per camera at the "
+             "largest: σ [mm] |",
+             "| --- | --- | --- | ---: | --- | ---: | --- | --- | ---: | --- |"]
     for name in RUNS:
         if args.only is not None and name not in args.only:
             continue
@@ -149,7 +201,8 @@ def main() -> None:
             return "/".join(f"{df[c].std() * 1e3:.1f}" for c in ("ex", "ey", "ez"))
 
         lines.append(f"| {name} | {worst(fused)} | {worst(late)} | {sd(fused)} | {worst(exact)} | {sd(exact)} | "
-                     f"{worst(shuffled)} | {worst(white)} |")
+                     f"{worst(shuffled)} | {worst(white)} | {consistency(fused)} | "
+                     f"{one_frame_sigmas(rig, measurements, fused)} |")
         print(lines[-1], flush=True)
     OUT.write_text("\n".join(lines) + "\n")
 
