@@ -5,8 +5,10 @@ with fog 50 % and rain 30 %, at 920×600 and 15 FPS, then tracked once; the same
 estimated in the paper's mode, the live rigid-body filter (default) and the offline smoother, and
 compared with the simulation log at the monitored cones. Results: benchmarks/results/accuracy.md.
 
-Run: .venv/bin/python benchmarks/accuracy.py [--fps 15] [--jobs 2] [--only config2-procedure5]
-Renders are cached in benchmarks/.cache/ (delete it to re-render).
+Run: .venv/bin/python benchmarks/accuracy.py [--fps 15] [--crf 16] [--jobs 2] [--only config2-procedure5]
+Renders are cached in benchmarks/.cache/ (delete it to re-render). --crf encodes the videos at another H.264 CRF
+than the scenarios' 20 (benchmarks/imaging.py: the video's quality limits the largest errors); its results go to
+accuracy-crfN.md.
 """
 
 from __future__ import annotations
@@ -57,16 +59,18 @@ TOLERANCE_M = 0.15
 RANGE_BIN_M = 0.5
 
 
-def render(name: str, fps: float) -> Path:
-    """Render one scenario at the given frame rate into the cache (once)."""
+def render(name: str, fps: float, crf: int | None = None) -> Path:
+    """Render one scenario at the given frame rate (and H.264 CRF, default the scenario's) into the cache (once)."""
     from tracking.sim.command import effective_duration, render_scenario
     from tracking.sim.scenario import load_scenario
 
-    out = CACHE / f"{name}{WEATHER}-{fps:g}fps"
+    out = CACHE / (f"{name}{WEATHER}-{fps:g}fps" + (f"-crf{crf}" if crf is not None else ""))
     if (out / "truth.csv").is_file():
         return out
     sc = load_scenario(name + WEATHER)
     sc = sc.model_copy(update={"cameras": [c.model_copy(update={"fps": fps}) for c in sc.cameras]})
+    if crf is not None:
+        sc = sc.model_copy(update={"weather": sc.weather.model_copy(update={"crf": crf})})
     out.mkdir(parents=True, exist_ok=True)
     render_scenario(sc, out, effective_duration(sc, None), quiet=True)
     return out
@@ -102,10 +106,10 @@ def measure(rig: Rig, detections: list[tuple[str, float, dict[int, np.ndarray]]]
     return out
 
 
-def run(name: str, fps: float) -> dict:
+def run(name: str, fps: float, crf: int | None = None) -> dict:
     """Render, track once, estimate in every mode; timings included."""
     t0 = time.perf_counter()
-    scene = render(name, fps)
+    scene = render(name, fps, crf)
     t1 = time.perf_counter()
     rig = with_mounts(load_rig(scene / "rig.yaml"), name)
     cache = scene / "detections.pkl"  # detection is the cost; poses and everything after are recomputed
@@ -173,13 +177,14 @@ def main() -> None:
     """Run everything, print and write the tables."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fps", type=float, default=15.0)
+    parser.add_argument("--crf", type=int, default=None, help="H.264 CRF of the renders (default: the scenarios' 20)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--only", nargs="*", default=None)
     args = parser.parse_args()
     names = [n for n in RUNS if args.only is None or n in args.only]
     CACHE.mkdir(parents=True, exist_ok=True)
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        results = list(pool.map(run, names, [args.fps] * len(names)))
+        results = list(pool.map(run, names, [args.fps] * len(names), [args.crf] * len(names)))
     by_name = {r["name"]: r for r in results}
     sections = []
     for group in dict.fromkeys(RUNS[n] for n in names):
@@ -205,11 +210,15 @@ def main() -> None:
                                                                for m in MODES) + " |")
     timing = [f"| {r['name']} | {r['render_s']:.0f} | {r['track_s']:.0f} | {r['truth']['time'].max():.0f} |"
               for r in results]
+    from tracking.sim.scenario import load_scenario
+
+    crf = args.crf if args.crf is not None else load_scenario(names[0] + WEATHER).weather.crf
     text = "\n".join([
         "# Accuracy against the simulator's truth",
         "",
         f"Procedures rendered with fog 50 % and rain 30 % (all of them, not only 3 and 4 as in the paper), "
-        f"920×600, {args.fps:g} FPS per camera, cameras unsynchronised; corners by edge fit; errors at the "
+        f"920×600, {args.fps:g} FPS per camera, H.264 at CRF {crf} (veryfast), "
+        "cameras unsynchronised; corners by edge fit; errors at the "
         "monitored cones. Modes: **paper** = the paper's method (camera 1 gives Δx, Δz, camera 2 Δy, Δz, "
         "10-sample running averages); **fused** = the live Kalman filter of the topside and every camera, "
         "measured by the markers' corners (default); "
@@ -232,16 +241,12 @@ def main() -> None:
         "| --- | --- | ---: | ---: | ---: | ---: |",
         *unseen,
         "",
-        "### Cost (one core per run)",
-        "",
-        "| procedure | render [s] | track [s] | simulated [s] |",
-        "| --- | ---: | ---: | ---: |",
-        *timing,
-        "",
+        *(["### Cost (one core per run)", "", "| procedure | render [s] | track [s] | simulated [s] |",
+           "| --- | ---: | ---: | ---: |", *timing, ""] if args.crf is None else []),  # --crf runs may reuse renders
     ])
     print(text)
     if args.only is None:
-        RESULTS.write_text(text)
+        (RESULTS if args.crf is None else RESULTS.with_name(f"accuracy-crf{args.crf}.md")).write_text(text)
 
 
 if __name__ == "__main__":
