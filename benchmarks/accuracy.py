@@ -59,21 +59,33 @@ TOLERANCE_M = 0.15
 RANGE_BIN_M = 0.5
 
 
-def render(name: str, fps: float, crf: int | None = None) -> Path:
-    """Render one scenario at the given frame rate (and H.264 CRF, default the scenario's) into the cache (once)."""
+def render(name: str, fps: float, weather: dict | None = None, duration: float | None = None) -> Path:
+    """Render one scenario at the given frame rate into the cache (once), with some of its weather fields changed
+    (e.g. {"crf": 16}) and cut to a duration when given."""
     from tracking.sim.command import effective_duration, render_scenario
     from tracking.sim.scenario import load_scenario
 
-    out = CACHE / (f"{name}{WEATHER}-{fps:g}fps" + (f"-crf{crf}" if crf is not None else ""))
+    tag = "".join(f"-{k}{v}" for k, v in (weather or {}).items()) + (f"-{duration:g}s" if duration else "")
+    out = CACHE / f"{name}{WEATHER}-{fps:g}fps{tag}"
     if (out / "truth.csv").is_file():
         return out
     sc = load_scenario(name + WEATHER)
-    sc = sc.model_copy(update={"cameras": [c.model_copy(update={"fps": fps}) for c in sc.cameras]})
-    if crf is not None:
-        sc = sc.model_copy(update={"weather": sc.weather.model_copy(update={"crf": crf})})
+    sc = sc.model_copy(update={"cameras": [c.model_copy(update={"fps": fps}) for c in sc.cameras],
+                               "weather": sc.weather.model_copy(update=weather or {})})
     out.mkdir(parents=True, exist_ok=True)
-    render_scenario(sc, out, effective_duration(sc, None), quiet=True)
+    render_scenario(sc, out, effective_duration(sc, duration), quiet=True)
     return out
+
+
+def detect(name: str, scene: Path) -> list[tuple[str, float, dict[int, np.ndarray]]]:
+    """A rendered scene's detections (camera, capture time, id -> corners): tracked once, cached with the scene
+    (detection is the cost; poses and everything after are recomputed)."""
+    cache = scene / "detections.pkl"
+    if not cache.is_file():
+        rig = with_mounts(load_rig(scene / "rig.yaml"), name)
+        cache.write_bytes(pickle.dumps([(r.camera, r.time, {d.id: d.corners for d in r.detections.markers})
+                                        for r in track_rig(rig)]))
+    return pickle.loads(cache.read_bytes())
 
 
 def frame(estimates: list[ConeEstimate]) -> pd.DataFrame:
@@ -106,18 +118,13 @@ def measure(rig: Rig, detections: list[tuple[str, float, dict[int, np.ndarray]]]
     return out
 
 
-def run(name: str, fps: float, crf: int | None = None) -> dict:
+def run(name: str, fps: float, weather: dict | None = None) -> dict:
     """Render, track once, estimate in every mode; timings included."""
     t0 = time.perf_counter()
-    scene = render(name, fps, crf)
+    scene = render(name, fps, weather)
     t1 = time.perf_counter()
     rig = with_mounts(load_rig(scene / "rig.yaml"), name)
-    cache = scene / "detections.pkl"  # detection is the cost; poses and everything after are recomputed
-    if cache.is_file():
-        detections = pickle.loads(cache.read_bytes())
-    else:
-        detections = [(r.camera, r.time, {d.id: d.corners for d in r.detections.markers}) for r in track_rig(rig)]
-        cache.write_bytes(pickle.dumps(detections))
+    detections = detect(name, scene)
     t2 = time.perf_counter()
     measurements = measure(rig, detections)
     cost_file = scene / "cost.json"  # measured when the scene was rendered and tracked, kept with the cache
@@ -184,7 +191,8 @@ def main() -> None:
     names = [n for n in RUNS if args.only is None or n in args.only]
     CACHE.mkdir(parents=True, exist_ok=True)
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        results = list(pool.map(run, names, [args.fps] * len(names), [args.crf] * len(names)))
+        weather = None if args.crf is None else {"crf": args.crf}
+        results = list(pool.map(run, names, [args.fps] * len(names), [weather] * len(names)))
     by_name = {r["name"]: r for r in results}
     sections = []
     for group in dict.fromkeys(RUNS[n] for n in names):

@@ -132,16 +132,7 @@ def one_frame_sigmas(rig, measurements: list, df: pd.DataFrame) -> str:
         if cam.T_jacket_camera is None or not kf.topside_placed:
             continue
         columns = [*range(6), *range(cam.index, cam.index + 6)]
-        rows = []
-        for marker in o.corners:
-            h = kf._predict_corners(cam, marker, kf.x, o.K)
-            H = np.zeros((8, len(columns)))
-            for j, k in enumerate(columns):
-                x1 = kf.x.copy()
-                x1[k] += fusion.JACOBIAN_STEP
-                H[:, j] = (kf._predict_corners(cam, marker, x1, o.K) - h) / fusion.JACOBIAN_STEP
-            rows.append(H)
-        H = np.vstack(rows)
+        H = np.vstack([kf.corner_jacobian(cam, marker, o.K, columns)[1] for marker in o.corners])
         info = H.T @ H / fusion.CORNER_NOISE_PX**2 + np.diag(1.0 / np.square(ONE_FRAME_PRIOR))
         cov = np.linalg.inv(info)[:6, :6]
         out.append(f"{name} {np.sqrt(c @ cov @ c) * 1e3:.0f}")

@@ -19,7 +19,6 @@ Run: .venv/bin/python benchmarks/imaging.py [--jobs 2] [--only config2-procedure
 from __future__ import annotations
 
 import argparse
-import pickle
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -29,13 +28,12 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from accuracy import CACHE, WEATHER, measure, with_mounts
-from fusion_diagnosis import consistency, errors, true_corners
+from accuracy import detect, measure, render, with_mounts
+from fusion_diagnosis import MAD_TO_SIGMA, consistency, errors, true_corners
 from report import write_results
 
 from tracking import fusion
 from tracking.camera import load_camera
-from tracking.pipeline import track_rig
 from tracking.rig import load_rig
 
 RUNS = ("config1-procedure1", "config2-procedure5", "config2-procedure7")
@@ -63,38 +61,15 @@ FPS = 15.0
 WINDOW_S = 2.0  # the slow part: σ of means over windows this long
 MIN_WINDOW_FRAMES = 10
 MIN_FRAMES = 60  # markers seen in fewer frames are left out of the second table
-MAD_TO_SIGMA = 1.4826
 CLIP_SIGMAS = 5.0  # rotation errors are clipped here before the window means (rain-struck corners)
 HALF = 0.5  # half the marker's side, m: IPPE's square
 SQUARE = np.array([[-HALF, HALF, 0], [HALF, HALF, 0], [HALF, -HALF, 0], [-HALF, -HALF, 0]])
 
 
-def scene_dir(name: str, change: dict, duration: float | None) -> Path:
-    """The cached render of a procedure with a weather change (the accuracy benchmark's when unchanged and whole)."""
-    if not change and duration is None:
-        return CACHE / f"{name}{WEATHER}-{FPS:g}fps"
-    tag = "-".join(f"{k}{v}" for k, v in change.items()) or "as-is"
-    return CACHE / (f"imaging-{name}-{tag}" + (f"-{duration:g}s" if duration else ""))
-
-
 def detections(name: str, change: dict, duration: float | None = None) -> tuple[Path, list]:
-    """Render (once) and detect (once): the scene and its detections (camera, time, corners)."""
-    from tracking.sim.command import effective_duration, render_scenario
-    from tracking.sim.scenario import load_scenario
-
-    out = scene_dir(name, change, duration)
-    if not (out / "truth.csv").is_file():
-        sc = load_scenario(name + WEATHER)
-        sc = sc.model_copy(update={"weather": sc.weather.model_copy(update=change),
-                                   "cameras": [c.model_copy(update={"fps": FPS}) for c in sc.cameras]})
-        out.mkdir(parents=True, exist_ok=True)
-        render_scenario(sc, out, effective_duration(sc, duration), quiet=True)
-    cache = out / "detections.pkl"
-    if not cache.is_file():
-        rig = with_mounts(load_rig(out / "rig.yaml"), name)
-        cache.write_bytes(pickle.dumps([(r.camera, r.time, {d.id: d.corners for d in r.detections.markers})
-                                        for r in track_rig(rig)]))
-    return out, pickle.loads(cache.read_bytes())
+    """The procedure rendered with a weather change (once) and its detections (once)."""
+    scene = render(name, FPS, change, duration)
+    return scene, detect(name, scene)
 
 
 def fused_row(job: tuple[str, str]) -> str:

@@ -579,19 +579,30 @@ class TopsideFilter:
         uv = pc @ K.T
         return (uv[:, :2] / uv[:, 2:3]).reshape(-1)
 
+    def corner_jacobian(self, cam: CameraState, marker: int, K: np.ndarray, columns: list[int]
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """A marker's corners predicted from the current state, (8,) ideal pixels, and their (8, C) forward-difference
+        Jacobian with respect to the state's entries at columns (C,)."""
+        assert self.x is not None
+        h = self._predict_corners(cam, marker, self.x, K)
+        J = np.empty((8, len(columns)))
+        for j, k in enumerate(columns):
+            x1 = self.x.copy()
+            x1[k] += JACOBIAN_STEP
+            J[:, j] = (self._predict_corners(cam, marker, x1, K) - h) / JACOBIAN_STEP
+        return h, J
+
     def _corner_update(self, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray,
                        topside: bool) -> bool:
         """One Kalman update with the corners (4, 2) of some markers of one body; False when none was used."""
         assert self.x is not None and self.P is not None
         sigma = CORNER_NOISE_PX
+        columns = [*(range(6) if topside else ()), *range(cam.index, cam.index + 6)]
         Hs, ys, Rs = [], [], []
         for marker, z in sorted(corners.items()):
-            h = self._predict_corners(cam, marker, self.x, K)
+            h, J = self.corner_jacobian(cam, marker, K, columns)
             H = np.zeros((8, self.size))
-            for k in [*(range(6) if topside else ()), *range(cam.index, cam.index + 6)]:
-                x1 = self.x.copy()
-                x1[k] += JACOBIAN_STEP
-                H[:, k] = (self._predict_corners(cam, marker, x1, K) - h) / JACOBIAN_STEP
+            H[:, columns] = J
             y = z.reshape(-1) - h
             HPH = H @ self.P @ H.T
             R = sigma**2 * np.eye(8)
