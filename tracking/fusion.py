@@ -248,6 +248,7 @@ class FilterStep:
     P: np.ndarray
     F: np.ndarray
     cameras: tuple[str, ...]
+    warming: bool  # within REPORT_WARMUP_S of the topside's (last) placement
 
 
 @dataclass
@@ -669,19 +670,23 @@ class TopsideFilter:
         assert self.time is not None
         return tuple(sorted(c for c, t in self.last_accepted.items() if self.time - t <= CONTRIBUTION_WINDOW_S))
 
+    def warming(self) -> bool:
+        """Whether the filter is within REPORT_WARMUP_S of the topside's (last) placement."""
+        assert self.time is not None
+        return self.placed_at is None or self.time - self.placed_at < REPORT_WARMUP_S
+
     def cone_estimates(self, x: np.ndarray | None = None, P: np.ndarray | None = None,
-                       time: float | None = None, cameras: tuple[str, ...] | None = None) -> list[ConeEstimate]:
-        """Offset and covariance at every cone from a state (default: the current one, reported as the live filter
-        does, withholding wide cones while it warms up; a given state, the smoother's, has seen the whole run)."""
-        live = x is None
+                       time: float | None = None, cameras: tuple[str, ...] | None = None,
+                       warming: bool | None = None) -> list[ConeEstimate]:
+        """Offset and covariance at every cone from a state (default: the current one), withholding cones whose σ
+        exceeds REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_M while warming (default: whether the filter is now)."""
         x = self.x if x is None else x
         P = self.P if P is None else P
         assert x is not None and P is not None
         time = self.time if time is None else time
         cameras = self.contributing() if cameras is None else cameras
-        limit = REPORT_MAX_SIGMA_M
-        if live and (self.placed_at is None or time - self.placed_at < REPORT_WARMUP_S):
-            limit = REPORT_WARMUP_SIGMA_M
+        warming = self.warming() if warming is None else warming
+        limit = REPORT_WARMUP_SIGMA_M if warming else REPORT_MAX_SIGMA_M
         out = []
         for cone, r in sorted(self.cones.items()):
             H = point_offset_matrix(r)
@@ -745,7 +750,8 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
         for m in group:
             kf.update(m)
         if kf.last_accepted:
-            steps.append(FilterStep(kf.time, x_pred, P_pred, kf.x.copy(), kf.P.copy(), F, kf.contributing()))
+            steps.append(FilterStep(kf.time, x_pred, P_pred, kf.x.copy(), kf.P.copy(), F, kf.contributing(),
+                                    kf.warming()))
     if not steps:
         return []
     xs, Ps = [steps[-1].x], [steps[-1].P]
@@ -758,7 +764,7 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
     Ps.reverse()
     out: list[ConeEstimate] = []
     for step, x, P in zip(steps, xs, Ps, strict=True):
-        out.extend(kf.cone_estimates(x, P, step.time, step.cameras))
+        out.extend(kf.cone_estimates(x, P, step.time, step.cameras, step.warming))
     return out
 
 

@@ -319,3 +319,18 @@ def test_warming_up_the_filter_reports_only_tight_cones() -> None:
     late = [sd for age, sd in shown if age >= REPORT_WARMUP_S]
     assert early and late
     assert max(early) <= REPORT_WARMUP_SIGMA_M < max(late) <= REPORT_MAX_SIGMA_M
+
+
+def test_the_smoother_warms_up_as_the_live_filter() -> None:
+    """The smoother's first seconds rest on the same first frames: it too withholds cones wider than 25 mm there."""
+    from tracking.fusion import REPORT_WARMUP_SIGMA_M
+
+    the_rig = camera_rig()
+    obs = observations(the_rig, 6.0)
+    smoothed = smoothed_estimates(the_rig, obs)
+    start = min(e.time for e in smoothed)
+    early = [e for e in smoothed if e.time - start < 0.5 * REPORT_WARMUP_S]
+    shown = [np.sqrt(np.diag(e.covariance)).max() for e in early if np.isfinite(e.offset).all()]
+    withheld = [np.sqrt(np.diag(e.covariance)).max() for e in early if np.isnan(e.offset).all()]
+    assert shown and withheld
+    assert max(shown) <= REPORT_WARMUP_SIGMA_M < min(withheld)
