@@ -3,7 +3,7 @@ effect taken away.
 
 Two tables. First, the whole procedure (accuracy benchmark's weather, 920×600, 15 FPS) rendered as is, without the
 shadow lines that sweep over the plates, and with the video encoded at lower CRFs and losslessly instead of H.264 at
-the benchmark's CRF 20: the video's bit rate per camera, the fused (live) filter's largest error per axis at the
+the scenarios' CRF: the video's bit rate per camera, the fused (live) filter's largest error per axis at the
 monitored cones, its MAE, and the share of errors beyond 2σ / 3σ of its own σ. Second, corner errors in SHORT_S
 seconds of procedure 5 under each imaging effect alone: the median corner error, and for each marker's pose (IPPE
 from the detected against from the true corners, the same camera) the rotation error per frame (robust σ) and its
@@ -139,9 +139,12 @@ def main() -> None:
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         fused = list(pool.map(fused_row, jobs))
         corners = list(pool.map(corner_row, SHORT_CHANGES)) if args.only is None else []
+    from tracking.sim.scenario import load_scenario
+
+    crf = load_scenario(RUNS[0] + "-weather").weather.crf
     lines = ["# Imaging effects behind the largest errors", "",
              "Procedures as in the accuracy benchmark (fog 50 %, rain 30 %, sensor noise, daylight changes, shadow "
-             "lines sweeping over the plates, motion blur, H.264 at the scenario's CRF 20; 920×600, 15 FPS), "
+             f"lines sweeping over the plates, motion blur, H.264 at the scenario's CRF {crf}; 920×600, 15 FPS), "
              "rendered again with one effect taken away, or the video encoded at a higher quality (H.264 veryfast at "
              "a lower CRF, or lossless). Fused (live) filter at the monitored cones: largest error "
              "and MAE per axis, and the share of errors beyond 2σ / 3σ of its own σ (a Gaussian: 4.6 / 0.27 %).", "",
