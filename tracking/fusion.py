@@ -739,7 +739,8 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
     """Recorded: the filter forward, then a Rauch-Tung-Striebel pass backward; the offset at every cone.
 
     The cameras' nominal poses move as the filter runs; the backward pass treats their errors about
-    the nominal of each step as the state, which holds to first order.
+    the nominal of each step as the state, which holds to first order. Cones are withheld by the live
+    filter's rule, its warm-up included: the smoother's first seconds rest on the same first frames.
     """
     kf = TopsideFilter(rig, tuning or FilterTuning())
     steps: list[FilterStep] = []
