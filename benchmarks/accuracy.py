@@ -7,7 +7,7 @@ compared with the simulation log at the monitored cones. Results: benchmarks/res
 
 Run: .venv/bin/python benchmarks/accuracy.py [--fps 15] [--crf 16] [--jobs 2] [--only config2-procedure5]
 Renders are cached in benchmarks/.cache/ (delete it to re-render). --crf encodes the videos at another H.264 CRF
-than the scenarios' 20 (benchmarks/imaging.py: the video's quality limits the largest errors); its results go to
+than the scenarios' own (benchmarks/imaging.py: the video's quality limits the largest errors); its results go to
 accuracy-crfN.md.
 """
 
@@ -77,6 +77,18 @@ def render(name: str, fps: float, weather: dict | None = None, duration: float |
     return out
 
 
+def scenario_crf(name: str) -> int:
+    """The H.264 CRF a scenario renders at."""
+    from tracking.sim.scenario import load_scenario
+
+    return load_scenario(name + WEATHER).weather.crf
+
+
+def bit_rate(rig: Rig, duration: float) -> list[float]:
+    """Each camera's video bit rate over a render of that duration, Mbit/s."""
+    return [rig.resolve(c.source).stat().st_size * 8 / 1e6 / duration for c in rig.cameras]
+
+
 def detect(name: str, scene: Path) -> list[tuple[str, float, dict[int, np.ndarray]]]:
     """A rendered scene's detections (camera, capture time, id -> corners): tracked once, cached with the scene
     (detection is the cost; poses and everything after are recomputed)."""
@@ -133,7 +145,8 @@ def run(name: str, fps: float, weather: dict | None = None) -> dict:
     cost.setdefault("track_s", t2 - t1)
     cost_file.write_text(json.dumps(cost))
     monitored = sorted({p.cone for p in rig.all_pairs()})
-    out = {"name": name, "truth": pd.read_csv(scene / "truth.csv"), "monitored": monitored, **cost}
+    truth = pd.read_csv(scene / "truth.csv")
+    out = {"name": name, "truth": truth, "monitored": monitored, "mbps": bit_rate(rig, truth["time"].max()), **cost}
     for mode in MODES:
         out[mode] = frame(list(ESTIMATORS[mode](rig, measurements)))
     return out
@@ -184,7 +197,7 @@ def main() -> None:
     """Run everything, print and write the tables."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fps", type=float, default=15.0)
-    parser.add_argument("--crf", type=int, default=None, help="H.264 CRF of the renders (default: the scenarios' 20)")
+    parser.add_argument("--crf", type=int, default=None, help="H.264 CRF of the renders (default: the scenarios' own)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--only", nargs="*", default=None)
     args = parser.parse_args()
@@ -218,14 +231,14 @@ def main() -> None:
                                                                for m in MODES) + " |")
     timing = [f"| {r['name']} | {r['render_s']:.0f} | {r['track_s']:.0f} | {r['truth']['time'].max():.0f} |"
               for r in results]
-    from tracking.sim.scenario import load_scenario
-
-    crf = args.crf if args.crf is not None else load_scenario(names[0] + WEATHER).weather.crf
+    crf = args.crf if args.crf is not None else scenario_crf(names[0])
+    mbps = [v for r in results for v in r["mbps"]]
     text = "\n".join([
         "# Accuracy against the simulator's truth",
         "",
         f"Procedures rendered with fog 50 % and rain 30 % (all of them, not only 3 and 4 as in the paper), "
-        f"920×600, {args.fps:g} FPS per camera, H.264 at CRF {crf} (veryfast), "
+        f"920×600, {args.fps:g} FPS per camera, H.264 at CRF {crf} (veryfast; {min(mbps):.1f}–{max(mbps):.1f} Mbit/s "
+        "per camera), "
         "cameras unsynchronised; corners by edge fit; errors at the "
         "monitored cones. Modes: **paper** = the paper's method (camera 1 gives Δx, Δz, camera 2 Δy, Δz, "
         "10-sample running averages); **fused** = the live Kalman filter of the topside and every camera, "

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from accuracy import detect, measure, render, with_mounts
+from accuracy import bit_rate, detect, measure, render, scenario_crf, with_mounts
 from fusion_diagnosis import MAD_TO_SIGMA, consistency, errors, true_corners
 from report import write_results
 
@@ -77,12 +77,10 @@ def fused_row(job: tuple[str, str]) -> str:
     name, label = job
     scene, found = detections(name, CHANGES[label])
     rig = with_mounts(load_rig(scene / "rig.yaml"), name)
-    df = errors(fusion.TopsideFilter(rig), measure(rig, found), pd.read_csv(scene / "truth.csv"),
-                sorted({p.cone for p in rig.all_pairs()}))
+    truth = pd.read_csv(scene / "truth.csv")
+    df = errors(fusion.TopsideFilter(rig), measure(rig, found), truth, sorted({p.cone for p in rig.all_pairs()}))
     e = df[["ex", "ey", "ez"]].abs() * 1e3
-    videos = [rig.resolve(c.source) for c in rig.cameras]
-    mbps = sum(v.stat().st_size for v in videos) * 8 / 1e6 / len(videos) / float(pd.read_csv(scene / "truth.csv")
-                                                                               ["time"].max())
+    mbps = float(np.mean(bit_rate(rig, truth["time"].max())))
     return (f"| {name} | {label} | {mbps:.1f} | " + " / ".join(f"{v:.0f}" for v in e.max()) + " | "
             + " / ".join(f"{v:.1f}" for v in e.mean()) + f" | {consistency(df)} |")
 
@@ -139,9 +137,7 @@ def main() -> None:
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         fused = list(pool.map(fused_row, jobs))
         corners = list(pool.map(corner_row, SHORT_CHANGES)) if args.only is None else []
-    from tracking.sim.scenario import load_scenario
-
-    crf = load_scenario(RUNS[0] + "-weather").weather.crf
+    crf = scenario_crf(RUNS[0])
     lines = ["# Imaging effects behind the largest errors", "",
              "Procedures as in the accuracy benchmark (fog 50 %, rain 30 %, sensor noise, daylight changes, shadow "
              f"lines sweeping over the plates, motion blur, H.264 at the scenario's CRF {crf}; 920×600, 15 FPS), "

@@ -11,7 +11,7 @@ import numpy as np
 TIME_BASE = Fraction(1, 90000)  # the MPEG clock: PTS ticks of 1/90000 s
 X264_PARAMS = "bframes=0:threads=1:mbtree=0"  # no B-frames (cameras stream I and P); one thread and no
 # macroblock-tree rate control, so that the same frames give the same bytes: with mbtree, 1-3 % of 0.4 s
-# renders came out different (a few P-frames, up to 8 levels) from identical frames (camera encoders lack it too)
+# renders came out different (a few P-frames, up to 8 levels) from identical frames
 
 
 def pts_of(seconds: float) -> int:
