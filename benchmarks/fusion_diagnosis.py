@@ -46,8 +46,8 @@ class TrueCameras(fusion.TopsideFilter):
 
     truth: pd.DataFrame
 
-    def predict(self, time: float) -> np.ndarray:
-        F = super().predict(time)
+    def predict(self, time: float, frame=()) -> fusion.Transition:
+        F = super().predict(time, frame)
         assert self.x is not None and self.P is not None and self.time is not None
         t = self.truth["time"].to_numpy()
         for name, cam in self.cameras.items():

@@ -19,6 +19,13 @@ Body poses (pose.estimate_body_pose) only place a camera or the topside at first
 Pair offsets (topside marker S displaced from its mated position, jacket frame) are accepted too:
 to first order in ω, o = (R - I) r_S + t ≈ t - [r_S]× ω, linear in the state.
 
+A marker's corners seen by one camera carry, besides white noise, an error that stays while the marker's image
+stays: the sub-pixel phase of its edges, the blur of its own data cells into the border, and the stream's coding
+of a still picture do not change from frame to frame. Each view (camera, marker) therefore has 8 bias states, one
+per corner coordinate, which renew as the marker's image moves (VIEW_BIAS_RENEW_PX). A still camera's view of a
+still jacket marker then tells the filter its pose to the bias's σ, however long it looks, instead of averaging
+a fixed error away as if it were noise (which left a still camera's swing 7σ off, and an offset 48 mm off).
+
 Measurements are applied at their capture times (cameras need no synchronisation), and the offset
 at every cone follows from the topside pose, including cones no camera sees. Corners far off are
 down-weighted (Huber-like), markers and pair offsets gated by their Mahalanobis distance. Offline,
@@ -28,9 +35,8 @@ a Rauch-Tung-Striebel pass smooths the run.
 from __future__ import annotations
 
 import bisect
-import functools
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import cv2
@@ -57,7 +63,17 @@ REPORT_WARMUP_SIGMA_M = 0.025  # this: the first frames leave the cameras' swing
 # are correlated over seconds (a far marker's depth and tilt cues), so a σ of 30 mm at 3 s still hid 54 mm
 # (accuracy benchmark; fusion_diagnosis.md: in procedure 5 the same errors shuffled in time give half of it)
 JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
-CORNER_NOISE_PX = 0.15  # σ of a corner coordinate: edge-fit corners in fog and rain have a median error of 0.1 px
+CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame: edge-fit corners in fog and rain have a median
+# error of 0.1 px
+VIEW = 8  # bias states per view (camera, marker): one per corner coordinate
+VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that stays while its marker's image stays: still markers in
+# still cameras keep whole-run mean errors of 0.03-0.11 px per corner (accuracy benchmark, CRF 22), and a synthetic
+# marker 39 px wide under 1.2 px blur keeps ±0.06 px from its own data cells alone
+VIEW_BIAS_RENEW_PX = 0.5  # that part renews as the marker's image moves: exp(-travel / this) of it stays from one frame
+# of the view to the next, travel the mean shift of its predicted corners. The filter's own corrections of a still
+# camera's pose count as travel too (0.01-0.05 px a frame): a still view keeps its bias for seconds, not for ever,
+# which did better than for ever (procedure 1: 48 against 102 mm) while the topside markers' corners share a bias the
+# model leaves out (see the README)
 CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
 # (1-4 % of corners are > 1 px off in rain: a heavy tail a Gaussian would follow)
 CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a hovering drone's jitter and a
@@ -122,21 +138,43 @@ def rate_decay(dt: float, tau: float) -> tuple[float, float]:
     return a, tau * (1.0 - a)
 
 
-def _transition(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(12 B, 12 B) [[I, B], [0, A]] per body from the rates' decay a (6 B,) and their weight b (6 B,) on the pose."""
-    blocks = a.size // 6
-    pose, rate = _pose_rate_indices(blocks)
-    F = np.eye(STATE * blocks)
-    F[pose, rate] = b
-    F[rate, rate] = a
-    return F
+def _body_rows(M: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """F M as a new array for M (n, k): F = [[I, B], [0, A]] per body on the first 12 B rows (rates' decay a (B, 6)
+    and their weight b (B, 6) on the pose), identity on the rest. O(n k), where a dense F would cost O(n² k)."""
+    out = np.array(M, order="C")
+    rows = out[:a.size * 2].reshape(len(a), 2, 6, -1)  # a view: rows of contiguous memory
+    rows[:, 0] += b[:, :, None] * rows[:, 1]
+    rows[:, 1] *= a[:, :, None]
+    return out
 
 
-@functools.cache
-def _pose_rate_indices(blocks: int) -> tuple[np.ndarray, np.ndarray]:
-    """Indices of the pose and of the rate components of B stacked bodies (12 each: 6 pose, 6 rates)."""
-    base = np.arange(blocks)[:, None] * STATE
-    return (base + np.arange(6)).ravel(), (base + 6 + np.arange(6)).ravel()
+@dataclass(frozen=True)
+class Transition:
+    """One prediction of the state (n,): bodies first (12 each), then view biases.
+
+    Per body, its rates' decay a (B, 6), their weight b (B, 6) on the pose and its process noise (B, 12, 12); per
+    view-bias state, the share of it that stays (V,), the rest renewed with VIEW_BIAS_PX.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    noise: np.ndarray
+    keep: np.ndarray
+
+    def apply(self, M: np.ndarray) -> np.ndarray:
+        """F M for M (n, k)."""
+        out = _body_rows(M, self.a, self.b)
+        out[self.a.size * 2:] *= self.keep[:, None]
+        return out
+
+    def covariance(self, P: np.ndarray) -> np.ndarray:
+        """F P Fᵀ + Q for a covariance P (n, n)."""
+        out = self.apply(self.apply(P).T)
+        for k, Q in enumerate(self.noise):
+            out[STATE * k:STATE * (k + 1), STATE * k:STATE * (k + 1)] += Q
+        nb = self.a.size * 2
+        out[nb:, nb:] += np.diag((1.0 - self.keep**2) * VIEW_BIAS_PX**2)
+        return out
 
 
 def _block_noise(dt: float, psds: list[float]) -> np.ndarray:
@@ -239,16 +277,26 @@ def measured_covariance(T_measured: np.ndarray, covariance: np.ndarray, T_predic
 
 @dataclass
 class FilterStep:
-    """One time step of the filter, kept for the smoother."""
+    """One time step of the filter, kept for the smoother (its predicted covariance follows from the previous step's P
+    and F: not kept, it would double the memory)."""
 
     time: float
     x_pred: np.ndarray
-    P_pred: np.ndarray
     x: np.ndarray
     P: np.ndarray
-    F: np.ndarray
+    F: Transition
     cameras: tuple[str, ...]
     warming: bool  # within REPORT_WARMUP_S of the topside's (last) placement
+
+
+@dataclass
+class ViewBias:
+    """The persistent corner errors of one marker seen by one camera: where their 8 states sit, and the marker's corners
+    (8,) predicted at its last frame (ideal pixels), from which the next frame's image travel is measured."""
+
+    index: int
+    corners: np.ndarray
+    time: float
 
 
 @dataclass
@@ -257,6 +305,7 @@ class CameraState:
 
     index: int  # first index of the camera's block in the state
     mount: str  # the rig's camera mount: its motion prior
+    name: str = ""
     T_jacket_camera: np.ndarray | None = None  # (4, 4), None until a jacket view places the camera
     consecutive_rejects: int = 0
     motion: CameraMotionLevel = field(default_factory=lambda: CameraMotionLevel())
@@ -338,8 +387,10 @@ class TopsideFilter:
     last_accepted: dict[str, float] = field(default_factory=dict)  # camera -> capture time of its topside view
 
     def __post_init__(self) -> None:
-        self.cameras = {c.name: CameraState(STATE * (1 + k), c.mount) for k, c in enumerate(self.rig.cameras)}
-        self.size = STATE * (1 + len(self.cameras))
+        self.cameras = {c.name: CameraState(STATE * (1 + k), c.mount, c.name) for k, c in enumerate(self.rig.cameras)}
+        self.body_size = STATE * (1 + len(self.cameras))
+        self.size = self.body_size
+        self.views: dict[tuple[str, int], ViewBias] = {}  # (camera, marker) -> its bias states, from its first corners
         self.x = np.zeros(self.size) if self.x is None else self.x
         if self.P is None:
             self.P = np.zeros((self.size, self.size))
@@ -369,37 +420,88 @@ class TopsideFilter:
             self.P[cam.index:cam.index + 6, cam.index:cam.index + 6] = covariance
         self.x[b] = 0.0
         cam.consecutive_rejects = 0
+        for (name, _), view in self.views.items():  # its views' biases: unknown again, and about nothing
+            if name == cam.name:
+                self._forget_view(view)
 
-    def predict(self, time: float) -> np.ndarray:
-        """Move the state to a capture time; returns the transition used."""
+    def _forget_view(self, view: ViewBias) -> None:
+        """A view's bias states back to their prior, decoupled from the rest."""
+        assert self.P is not None and self.x is not None
+        v = slice(view.index, view.index + VIEW)
+        self.P[v, :] = 0.0
+        self.P[:, v] = 0.0
+        self.P[v, v] = VIEW_BIAS_PX**2 * np.eye(VIEW)
+        self.x[v] = 0.0
+
+    def predict(self, time: float, frame: Sequence[Measurement] = ()) -> Transition:
+        """Move the state to a capture time and renew the corner biases of the views a frame's body observations will
+        measure, by how far their markers' images moved; returns the transition used."""
         assert self.P is not None and self.x is not None
         dt = 0.0 if self.time is None else max(0.0, time - self.time)
         blocks = 1 + len(self.cameras)
         a_cam, b_cam = rate_decay(dt, CAMERA_RATE_TAU_S)  # the topside keeps its speed, cameras' rates revert
-        a, b = np.full(6 * blocks, a_cam), np.full(6 * blocks, b_cam)
-        a[:6], b[:6] = 1.0, dt
-        F = _transition(a, b)
-        a, b = a.reshape(blocks, 6), b.reshape(blocks, 6)
-        self.x = self.x.copy()  # F = [[I, B], [0, A]] per body: F P Fᵀ in O(n²) on views of poses and rates
-        x = self.x.reshape(blocks, 2, 6)
-        x[:, 0] += b * x[:, 1]
-        x[:, 1] *= a
-        P = self.P.copy()
-        rows = P.reshape(blocks, 2, 6, -1)
-        rows[:, 0] += b[:, :, None] * rows[:, 1]
-        rows[:, 1] *= a[:, :, None]
-        cols = P.reshape(-1, blocks, 2, 6)
-        cols[:, :, 0] += cols[:, :, 1] * b[None]
-        cols[:, :, 1] *= a[None]
-        self.P = P
-        self.P[:STATE, :STATE] += process_noise(dt, self.tuning)
-        for cam in self.cameras.values():
+        a, b = np.full((blocks, 6), a_cam), np.full((blocks, 6), b_cam)
+        a[0], b[0] = 1.0, dt
+        noise = np.zeros((blocks, STATE, STATE))
+        noise[0] = process_noise(dt, self.tuning)
+        for k, cam in enumerate(self.cameras.values()):
             if cam.T_jacket_camera is not None:
-                self.P[cam.index:cam.index + STATE, cam.index:cam.index + STATE] += \
-                    camera_process_noise(dt, self.tuning, cam.mount, cam.motion_scale)
+                noise[1 + k] = camera_process_noise(dt, self.tuning, cam.mount, cam.motion_scale)
+        bodies = Transition(a, b, noise, np.ones(self.size - self.body_size))
+        self.x = bodies.apply(self.x[:, None])[:, 0]
+        self.P = bodies.covariance(self.P)
         self._fold_cameras()
         self.time = time if self.time is None else max(self.time, time)
-        return F
+        keep = self._renew([o for o in frame if isinstance(o, BodyObservation)])
+        return Transition(a, b, noise, keep)
+
+    def _renew(self, frame: list[BodyObservation]) -> np.ndarray:
+        """Renew the biases of a frame's views not yet renewed for it; the share of each bias state that stayed (V,)."""
+        assert self.x is not None and self.P is not None
+        nb = self.body_size
+        keep = np.ones(self.size - nb)
+        for o in frame:
+            for view, share in self._renewed(o):
+                keep[view.index - nb:view.index - nb + VIEW] = share
+        if (keep < 1.0).any():  # as Transition.covariance does for the views, on the state in place
+            self.x = self.x.copy()
+            self.x[nb:] *= keep
+            self.P = self.P * np.concatenate([np.ones(nb), keep])[:, None]
+            self.P[:, nb:] *= keep
+            self.P[nb:, nb:] += np.diag((1.0 - keep**2) * VIEW_BIAS_PX**2)
+        return keep
+
+    def _renewed(self, o: BodyObservation) -> list[tuple[ViewBias, float]]:
+        """The views of a camera frame not yet renewed for it, each with the share of its bias that stays: exp(-travel /
+        VIEW_BIAS_RENEW_PX), travel the mean shift of its marker's predicted corners since its last frame."""
+        cam = self.cameras.get(o.camera)
+        if cam is None or cam.T_jacket_camera is None:
+            return []
+        assert self.x is not None
+        out = []
+        for marker in o.corners:
+            view = self.views.get((o.camera, marker))
+            if view is None or view.time == o.time or (marker in self.topside_corners and not self.topside_placed):
+                continue
+            h = self._predict_corners(cam, marker, self.x, o.K)
+            travel = float(np.linalg.norm((h - view.corners).reshape(4, 2), axis=1).mean())
+            view.corners, view.time = h, o.time
+            out.append((view, float(np.exp(-travel / VIEW_BIAS_RENEW_PX))))
+        return out
+
+    def _view(self, cam: CameraState, marker: int, K: np.ndarray, time: float) -> ViewBias:
+        """The bias states of a camera's view of a marker; a new view's appended to the state with its prior."""
+        assert self.P is not None and self.x is not None
+        key = (cam.name, marker)
+        if key not in self.views:
+            n = self.size
+            self.x = np.concatenate([self.x, np.zeros(VIEW)])
+            P = np.zeros((n + VIEW, n + VIEW))
+            P[:n, :n] = self.P
+            P[n:, n:] = VIEW_BIAS_PX**2 * np.eye(VIEW)
+            self.P, self.size = P, n + VIEW
+            self.views[key] = ViewBias(n, self._predict_corners(cam, marker, self.x, K), time)
+        return self.views[key]
 
     def _measure_motion(self, cam: CameraState, time: float, jacket: dict[int, np.ndarray], K: np.ndarray) -> None:
         """A frame's jacket corners into the camera's motion level; its process noise scaled to that level."""
@@ -594,17 +696,21 @@ class TopsideFilter:
         return h, J
 
     def _corner_update(self, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray,
-                       topside: bool) -> bool:
-        """One Kalman update with the corners (4, 2) of some markers of one body; False when none was used."""
+                       topside: bool, time: float) -> bool:
+        """One Kalman update with the corners (4, 2) of some markers of one body, each with its view's bias; False when
+        none was used."""
         assert self.x is not None and self.P is not None
         sigma = CORNER_NOISE_PX
         columns = [*(range(6) if topside else ()), *range(cam.index, cam.index + 6)]
+        views = {marker: self._view(cam, marker, K, time).index for marker in sorted(corners)}
         Hs, ys, Rs = [], [], []
         for marker, z in sorted(corners.items()):
             h, J = self.corner_jacobian(cam, marker, K, columns)
+            v = slice(views[marker], views[marker] + VIEW)
             H = np.zeros((8, self.size))
             H[:, columns] = J
-            y = z.reshape(-1) - h
+            H[:, v] = np.eye(VIEW)
+            y = z.reshape(-1) - h - self.x[v]
             HPH = H @ self.P @ H.T
             R = sigma**2 * np.eye(8)
             for j in range(4):  # robust: a corner far off (rain, glare) counts as if at the threshold
@@ -648,8 +754,9 @@ class TopsideFilter:
         jacket = {i: z for i, z in o.corners.items() if i in self.jacket_corners}
         self._measure_motion(cam, o.time, jacket, o.K)
         topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
-        used_jacket = self._corner_update(cam, jacket, o.K, False)  # the camera first, then the topside
-        used_topside = self._corner_update(cam, topside, o.K, True)  # through the camera just refined
+        self._renew([o])  # when predict was not given the frame
+        used_jacket = self._corner_update(cam, jacket, o.K, False, o.time)  # the camera first, then the topside
+        used_topside = self._corner_update(cam, topside, o.K, True, o.time)  # through the camera just refined
         if o.jacket is not None:
             cam.consecutive_rejects = 0 if used_jacket else cam.consecutive_rejects + 1
             if cam.consecutive_rejects >= REINIT_AFTER_REJECTS:  # lost: place it again at its next view
@@ -728,7 +835,7 @@ def fused_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Filte
 def filter_frame(kf: TopsideFilter, group: list[Measurement]) -> list[ConeEstimate]:
     """One camera frame's measurements applied at its capture time; the estimate at every cone after it
     (none until something was accepted; from then on, every frame gives one)."""
-    kf.predict(group[0].time)
+    kf.predict(group[0].time, group)
     for m in preferred(group):
         kf.update(m)
     return kf.cone_estimates() if kf.last_accepted else []
@@ -743,30 +850,33 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
     filter's rule, its warm-up included: the smoother's first seconds rest on the same first frames.
     """
     kf = TopsideFilter(rig, tuning or FilterTuning())
-    steps: list[FilterStep] = []
+    steps: list[FilterStep | None] = []
     for group in _frames(measurements):
-        F = kf.predict(group[0].time)
+        F = kf.predict(group[0].time, group)
         assert kf.x is not None and kf.P is not None
-        x_pred, P_pred = kf.x.copy(), kf.P.copy()
+        x_pred = kf.x.copy()
         for m in group:
             kf.update(m)
         if kf.last_accepted:
-            steps.append(FilterStep(kf.time, x_pred, P_pred, kf.x.copy(), kf.P.copy(), F, kf.contributing(),
-                                    kf.warming()))
+            steps.append(FilterStep(kf.time, x_pred, kf.x.copy(), kf.P.copy(), F, kf.contributing(), kf.warming()))
     if not steps:
         return []
-    xs, Ps = [steps[-1].x], [steps[-1].P]
+    last = steps[-1]
+    assert last is not None
+    x_s, P_s = last.x, last.P
+    out = [kf.cone_estimates(x_s, P_s, last.time, last.cameras, last.warming)]
     for k in range(len(steps) - 2, -1, -1):
-        nxt = steps[k + 1]
-        C = np.linalg.solve(nxt.P_pred, nxt.F @ steps[k].P).T  # P Fᵀ P_pred⁻¹ (P_pred symmetric)
-        xs.append(steps[k].x + C @ (xs[-1] - nxt.x_pred))
-        Ps.append(steps[k].P + C @ (Ps[-1] - nxt.P_pred) @ C.T)
-    xs.reverse()
-    Ps.reverse()
-    out: list[ConeEstimate] = []
-    for step, x, P in zip(steps, xs, Ps, strict=True):
-        out.extend(kf.cone_estimates(x, P, step.time, step.cameras, step.warming))
-    return out
+        step, nxt = steps[k], steps[k + 1]
+        assert step is not None and nxt is not None
+        n = step.x.size  # views first seen after this step are independent of it: their states drop out
+        P_pred = nxt.F.covariance(step.P)
+        C = np.linalg.solve(P_pred, nxt.F.apply(step.P)).T  # P Fᵀ P_pred⁻¹ (P_pred symmetric)
+        x_s = step.x + C @ (x_s[:n] - nxt.x_pred)
+        P_s = step.P + C @ (P_s[:n, :n] - P_pred) @ C.T
+        steps[k + 1] = None  # done with: the memory goes as the pass goes
+        out.append(kf.cone_estimates(x_s, P_s, step.time, step.cameras, step.warming))
+    out.reverse()
+    return [e for estimates in out for e in estimates]
 
 
 def _pair_offsets(measurements: Iterable[Measurement]) -> Iterator[PairOffset]:
