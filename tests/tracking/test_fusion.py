@@ -389,3 +389,30 @@ def test_a_views_bias_stays_while_its_image_stays() -> None:
                 keeps.setdefault(key, []).append(float(F.keep[view.index - kf.body_size]))
     assert np.median(keeps["far", 0]) > 0.9  # jacket marker 0 at cone A, ahead: the far camera's on a vessel, still
     assert np.median(keeps["side", 3]) < 0.2  # topside marker 3 at cone A, port: moving astern across the side view
+
+
+def test_a_view_with_a_corner_off_does_not_place_a_camera() -> None:
+    """A camera is placed only by a view whose pose fits its corners to within their noise: with one corner 2.7 px
+    off (a rain hit) its first view leaves it unplaced, and the next, clean one places it."""
+    from tracking.fusion import fits_its_corners
+
+    the_rig = camera_rig("vessel")
+    camera = CameraModel(K, np.zeros(5), 920, 600)
+    obs = observations(the_rig, 1.0)
+    k, first = next((k, o) for k, o in enumerate(obs) if o.camera == "far" and o.jacket is not None)
+    corners = {i: c.copy() for i, c in first.corners.items()}
+    corners[first.jacket.marker_ids[0]][0] += [2.7, 0.0]
+    poses = {i: estimate_pose(MarkerDetection(i, c), camera, the_rig.marker_size) for i, c in corners.items()}
+    bad = observe_bodies(body_geometry(the_rig), poses, camera, "far", first.time, the_rig.marker_size)
+    assert bad is not None and bad.jacket is not None
+    assert fits_its_corners(first.jacket) and not fits_its_corners(bad.jacket)
+    kf = TopsideFilter(the_rig)
+    for o in [*obs[:k], bad]:
+        kf.predict(o.time, [o])
+        kf.update(o)
+    assert kf.cameras["far"].T_jacket_camera is None
+    nxt = next(o for o in obs[k + 1:] if o.camera == "far" and o.jacket is not None)
+    for o in obs[k + 1:obs.index(nxt) + 1]:
+        kf.predict(o.time, [o])
+        kf.update(o)
+    assert kf.cameras["far"].T_jacket_camera is not None
