@@ -72,8 +72,8 @@ VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that stays while its m
 VIEW_BIAS_RENEW_PX = 0.5  # that part renews as the marker's image moves: exp(-travel / this) of it stays from one frame
 # of the view to the next, travel the mean shift of its predicted corners. The filter's own corrections of a still
 # camera's pose count as travel too (0.01-0.05 px a frame): a still view keeps its bias for seconds, not for ever,
-# which did better than for ever (procedure 1: 48 against 102 mm) while the topside markers' corners share a bias the
-# model leaves out (see the README)
+# which did better than for ever (procedure 1, before the placement check: 48 against 102 mm) while the topside
+# markers' corners share a bias the model leaves out (see the README)
 CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
 # (1-4 % of corners are > 1 px off in rain: a heavy tail a Gaussian would follow)
 CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a hovering drone's jitter and a
