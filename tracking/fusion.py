@@ -153,6 +153,13 @@ def _body_rows(M: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def _body_columns(M: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
+    """M Fᵀ in place for a C-ordered M (k, n), F as in _body_rows."""
+    cols = M[:, :a.size * 2].reshape(len(M), len(a), 2, 6)  # a view: each row's first 12 B entries are contiguous
+    cols[:, :, 0] += cols[:, :, 1] * b[None]
+    cols[:, :, 1] *= a[None]
+
+
 @dataclass(frozen=True)
 class Transition:
     """One prediction of the state (n,): bodies first (12 each), then view biases.
@@ -174,7 +181,9 @@ class Transition:
 
     def covariance(self, P: np.ndarray) -> np.ndarray:
         """F P Fᵀ + Q for a covariance P (n, n)."""
-        out = self.apply(self.apply(P).T)
+        out = self.apply(P)
+        _body_columns(out, self.a, self.b)
+        out[:, self.a.size * 2:] *= self.keep[None, :]
         for k, Q in enumerate(self.noise):
             out[STATE * k:STATE * (k + 1), STATE * k:STATE * (k + 1)] += Q
         nb = self.a.size * 2
@@ -221,8 +230,8 @@ def point_offset_matrix(r: np.ndarray) -> np.ndarray:
 
 def fits_its_corners(pose: BodyPose) -> bool:
     """Whether a pose's reprojection RMS is what corner noise of CORNER_NOISE_PX leaves at PLACEMENT_FIT_P
-    (Wilson-Hilferty's χ² quantile, within 1 % from 2 degrees of freedom up)."""
-    points = 8 * len(pose.marker_ids)
+    over the corners its fit kept (Wilson-Hilferty's χ² quantile, within 1 % from 2 degrees of freedom up)."""
+    points = 8 * len(pose.marker_ids) - 2 * pose.outliers  # coordinates of the corners the fit kept
     dof = points - 6
     quantile = dof * (1.0 - 2.0 / (9 * dof) + Z_99 * np.sqrt(2.0 / (9 * dof))) ** 3
     return pose.reprojection_error**2 * points <= quantile * CORNER_NOISE_PX**2
@@ -319,7 +328,7 @@ class CameraState:
 
     index: int  # first index of the camera's block in the state
     mount: str  # the rig's camera mount: its motion prior
-    name: str = ""
+    name: str  # the rig's camera name: its views' key
     T_jacket_camera: np.ndarray | None = None  # (4, 4), None until a jacket view places the camera
     consecutive_rejects: int = 0
     motion: CameraMotionLevel = field(default_factory=lambda: CameraMotionLevel())
@@ -403,11 +412,10 @@ class TopsideFilter:
     def __post_init__(self) -> None:
         self.cameras = {c.name: CameraState(STATE * (1 + k), c.mount, c.name) for k, c in enumerate(self.rig.cameras)}
         self.body_size = STATE * (1 + len(self.cameras))
-        self.size = self.body_size
         self.views: dict[tuple[str, int], ViewBias] = {}  # (camera, marker) -> its bias states, from its first corners
-        self.x = np.zeros(self.size) if self.x is None else self.x
+        self.x = np.zeros(self.body_size) if self.x is None else self.x
         if self.P is None:
-            self.P = np.zeros((self.size, self.size))
+            self.P = np.zeros((self.body_size, self.body_size))
             self.P[:STATE, :STATE] = prior_covariance(self.tuning)
             for cam in self.cameras.values():
                 self._reset_camera(cam)
@@ -420,6 +428,12 @@ class TopsideFilter:
         markers = self.rig.marker_by_id
         self.topside_points = {m.id: np.array(m.center) for m in markers.values() if m.body == "topside"}
         self.cones = cone_points(self.rig)
+
+    @property
+    def size(self) -> int:
+        """Length of the state: the bodies' and the views' biases so far."""
+        assert self.x is not None
+        return self.x.size
 
     def _reset_camera(self, cam: CameraState, covariance: np.ndarray | None = None) -> None:
         """Forget a camera: its block decoupled, its pose covariance given (or unit), its rates' prior."""
@@ -477,10 +491,9 @@ class TopsideFilter:
         for o in frame:
             for view, share in self._renewed(o):
                 keep[view.index - nb:view.index - nb + VIEW] = share
-        if (keep < 1.0).any():  # as Transition.covariance does for the views, on the state in place
-            self.x = self.x.copy()
-            self.x[nb:] *= keep
-            self.P = self.P * np.concatenate([np.ones(nb), keep])[:, None]
+        if (keep < 1.0).any():  # as Transition.covariance does for the views, in place: predict and _apply leave
+            self.x[nb:] *= keep  # arrays that nothing else holds
+            self.P[nb:, :] *= keep[:, None]
             self.P[:, nb:] *= keep
             self.P[nb:, nb:] += np.diag((1.0 - keep**2) * VIEW_BIAS_PX**2)
         return keep
@@ -513,7 +526,7 @@ class TopsideFilter:
             P = np.zeros((n + VIEW, n + VIEW))
             P[:n, :n] = self.P
             P[n:, n:] = VIEW_BIAS_PX**2 * np.eye(VIEW)
-            self.P, self.size = P, n + VIEW
+            self.P = P
             self.views[key] = ViewBias(n, self._predict_corners(cam, marker, self.x, K), time)
         return self.views[key]
 
@@ -868,7 +881,7 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
     filter's rule, its warm-up included: the smoother's first seconds rest on the same first frames.
     """
     kf = TopsideFilter(rig, tuning or FilterTuning())
-    steps: list[FilterStep | None] = []
+    steps: list[FilterStep] = []
     for group in _frames(measurements):
         F = kf.predict(group[0].time, group)
         assert kf.x is not None and kf.P is not None
@@ -879,20 +892,18 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
             steps.append(FilterStep(kf.time, x_pred, kf.x.copy(), kf.P.copy(), F, kf.contributing(), kf.warming()))
     if not steps:
         return []
-    last = steps[-1]
-    assert last is not None
-    x_s, P_s = last.x, last.P
-    out = [kf.cone_estimates(x_s, P_s, last.time, last.cameras, last.warming)]
-    for k in range(len(steps) - 2, -1, -1):
-        step, nxt = steps[k], steps[k + 1]
-        assert step is not None and nxt is not None
+    nxt = steps.pop()  # popped as the pass goes back: the memory goes with it
+    x_s, P_s = nxt.x, nxt.P
+    out = [kf.cone_estimates(x_s, P_s, nxt.time, nxt.cameras, nxt.warming)]
+    while steps:
+        step = steps.pop()
         n = step.x.size  # views first seen after this step are independent of it: their states drop out
         P_pred = nxt.F.covariance(step.P)
         C = np.linalg.solve(P_pred, nxt.F.apply(step.P)).T  # P Fᵀ P_pred⁻¹ (P_pred symmetric)
         x_s = step.x + C @ (x_s[:n] - nxt.x_pred)
         P_s = step.P + C @ (P_s[:n, :n] - P_pred) @ C.T
-        steps[k + 1] = None  # done with: the memory goes as the pass goes
         out.append(kf.cone_estimates(x_s, P_s, step.time, step.cameras, step.warming))
+        nxt = step
     out.reverse()
     return [e for estimates in out for e in estimates]
 

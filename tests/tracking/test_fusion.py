@@ -336,7 +336,7 @@ def test_the_smoother_warms_up_as_the_live_filter() -> None:
     assert max(shown) <= REPORT_WARMUP_SIGMA_M < min(withheld)
 
 
-def frozen_corner_run(pattern_px: float) -> tuple[float, float, float]:
+def frozen_corner_run(pattern_px: float) -> tuple[float, float]:
     """12 s with a still far camera whose jacket corners all carry one fixed error pattern (σ pattern_px per coordinate,
     as a still marker's pixel phase and the stream's coding of a still picture leave it): the far camera's swing error
     over its own σ, and the share of cone errors within 3σ."""
