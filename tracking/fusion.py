@@ -62,6 +62,10 @@ REPORT_WARMUP_SIGMA_M = 0.025  # this: the first frames leave the cameras' swing
 # and not Gaussian, and errors of 3-4σ of a 25-50 mm σ were reported in the first second; the corners' errors
 # are correlated over seconds (a far marker's depth and tilt cues), so a σ of 30 mm at 3 s still hid 54 mm
 # (accuracy benchmark; fusion_diagnosis.md: in procedure 5 the same errors shuffled in time give half of it)
+SMOOTHER_SPAN_S = 30.0  # recorded runs are smoothed this much at a time, each time with SMOOTHER_LAG_S of the
+SMOOTHER_LAG_S = 45.0  # future after it: memory holds the steps of both, not of the whole run (1.9 GB per 95 s of
+# five cameras). A still camera's pose gains from the far future: procedure 1 (95 s) smoothed with 15 / 30 / 45 s of
+# it has a y MAE of 10.2 / 6.5 / 5.8 mm, the whole run 5.9 mm (accuracy benchmark, CRF 22)
 JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame: edge-fit corners in fog and rain have a median
 # error of 0.1 px
@@ -872,10 +876,12 @@ def filter_frame(kf: TopsideFilter, group: list[Measurement]) -> list[ConeEstima
     return kf.cone_estimates() if kf.last_accepted else []
 
 
-def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: FilterTuning | None = None
-                       ) -> list[ConeEstimate]:
-    """Recorded: the filter forward, then a Rauch-Tung-Striebel pass backward; the offset at every cone.
+def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: FilterTuning | None = None,
+                       span_s: float = SMOOTHER_SPAN_S, lag_s: float = SMOOTHER_LAG_S) -> Iterator[ConeEstimate]:
+    """Recorded: the filter forward, then Rauch-Tung-Striebel passes backward; the offset at every cone, in time order.
 
+    The backward pass runs whenever the kept steps span span_s + lag_s: from the newest step back, it gives the steps
+    older than lag_s before the newest and lets them go, so memory holds span_s + lag_s of the run, not all of it.
     The cameras' nominal poses move as the filter runs; the backward pass treats their errors about
     the nominal of each step as the state, which holds to first order. Cones are withheld by the live
     filter's rule, its warm-up included: the smoother's first seconds rest on the same first frames.
@@ -890,22 +896,30 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
             kf.update(m)
         if kf.last_accepted:
             steps.append(FilterStep(kf.time, x_pred, kf.x.copy(), kf.P.copy(), F, kf.contributing(), kf.warming()))
+            if steps[-1].time - steps[0].time >= span_s + lag_s:
+                yield from _smooth_back(kf, steps, steps[-1].time - lag_s)
+    yield from _smooth_back(kf, steps, np.inf)
+
+
+def _smooth_back(kf: TopsideFilter, steps: list[FilterStep], until: float) -> Iterator[ConeEstimate]:
+    """One backward (RTS) pass from the newest of steps: the estimates of the steps before until, which leave steps."""
     if not steps:
-        return []
-    nxt = steps.pop()  # popped as the pass goes back: the memory goes with it
+        return
+    nxt = steps[-1]
     x_s, P_s = nxt.x, nxt.P
-    out = [kf.cone_estimates(x_s, P_s, nxt.time, nxt.cameras, nxt.warming)]
-    while steps:
-        step = steps.pop()
+    out = [kf.cone_estimates(x_s, P_s, nxt.time, nxt.cameras, nxt.warming)] if nxt.time < until else []
+    for step in reversed(steps[:-1]):
         n = step.x.size  # views first seen after this step are independent of it: their states drop out
         P_pred = nxt.F.covariance(step.P)
         C = np.linalg.solve(P_pred, nxt.F.apply(step.P)).T  # P Fᵀ P_pred⁻¹ (P_pred symmetric)
         x_s = step.x + C @ (x_s[:n] - nxt.x_pred)
         P_s = step.P + C @ (P_s[:n, :n] - P_pred) @ C.T
-        out.append(kf.cone_estimates(x_s, P_s, step.time, step.cameras, step.warming))
+        if step.time < until:
+            out.append(kf.cone_estimates(x_s, P_s, step.time, step.cameras, step.warming))
         nxt = step
-    out.reverse()
-    return [e for estimates in out for e in estimates]
+    del steps[:len(out)]  # the smoothed ones are the oldest: the rest waits for more of the future
+    for estimates in reversed(out):
+        yield from estimates
 
 
 def _pair_offsets(measurements: Iterable[Measurement]) -> Iterator[PairOffset]:

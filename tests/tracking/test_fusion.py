@@ -327,13 +327,40 @@ def test_the_smoother_warms_up_as_the_live_filter() -> None:
 
     the_rig = camera_rig()
     obs = observations(the_rig, 6.0)
-    smoothed = smoothed_estimates(the_rig, obs)
+    smoothed = list(smoothed_estimates(the_rig, obs))
     start = min(e.time for e in smoothed)
     early = [e for e in smoothed if e.time - start < 0.5 * REPORT_WARMUP_S]
     shown = [np.sqrt(np.diag(e.covariance)).max() for e in early if np.isfinite(e.offset).all()]
     withheld = [np.sqrt(np.diag(e.covariance)).max() for e in early if np.isnan(e.offset).all()]
     assert shown and withheld
     assert max(shown) <= REPORT_WARMUP_SIGMA_M < min(withheld)
+
+
+def test_a_long_run_is_smoothed_piece_by_piece() -> None:
+    """The smoother gives its first estimates before the run is read through, in time order, and over the run's
+    last lag (whose future is all there) it is the whole-run smoother."""
+    the_rig = camera_rig("vessel")
+    obs = observations(the_rig, 8.0)
+    read = []
+
+    def reading():
+        for o in obs:
+            read.append(o.time)
+            yield o
+
+    pieces = smoothed_estimates(the_rig, reading(), span_s=1.5, lag_s=2.0)
+    first = next(pieces)
+    assert first.time < 1.0 and read[-1] < 4.0  # memory holds span + lag, not the run
+    pieced = [first, *pieces]
+    whole = list(smoothed_estimates(the_rig, obs, span_s=1e9))
+    assert [(e.time, e.cone) for e in pieced] == [(e.time, e.cone) for e in whole]
+    assert np.all(np.diff([e.time for e in pieced]) >= 0)
+    last = obs[-1].time - 2.0
+    gap = [np.abs(a.offset - b.offset).max() for a, b in zip(pieced, whole, strict=True)
+           if a.time > last and np.isfinite(a.offset).all()]
+    assert gap and max(gap) < 1e-9
+    err_pieced, err_whole = corner_errors(pieced), corner_errors(whole)
+    assert np.sqrt((err_pieced**2).mean()) < 1.2 * np.sqrt((err_whole**2).mean())
 
 
 def frozen_corner_run(pattern_px: float) -> tuple[float, float]:
