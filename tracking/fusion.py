@@ -78,6 +78,13 @@ VIEW_BIAS_RENEW_PX = 0.5  # that part renews as the marker's image moves: exp(-t
 # camera's pose count as travel too (0.01-0.05 px a frame): a still view keeps its bias for seconds, not for ever,
 # which did better than for ever (procedure 1, before the placement check: 48 against 102 mm) while the topside
 # markers' corners share a bias the model leaves out (see the README)
+VIEW_BIAS_TAU_S = 0.5  # ... but no faster than with this time constant, however far the image travels. A drone's
+# views travel 1.2-1.5 px a frame, and renewed by travel alone their biases counted as white noise: the keystone of a
+# drone's one marker then set its swing about it, and with it x at cone A, 56 mm off at 3σ in procedure 5's first
+# seconds (a marker's own cells and the stream's motion-compensated coding move with the marker, not with the pixel
+# grid). Chosen on the accuracy benchmark, procedure 5's largest error at 0.25 / 0.5 / 1 s: 47 / 40 / 40 mm (CRF 22).
+# It says more than the corners' statistics do (per coordinate, 95 % of a drone view's error variance is white), so
+# σ is conservative in configuration 2: beyond 2σ lie 0.2-0.5 % of the errors there (a Gaussian: 4.6 %)
 CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
 # (1-4 % of corners are > 1 px off in rain: a heavy tail a Gaussian would follow)
 CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a hovering drone's jitter and a
@@ -504,7 +511,8 @@ class TopsideFilter:
 
     def _renewed(self, o: BodyObservation) -> list[tuple[ViewBias, float]]:
         """The views of a camera frame not yet renewed for it, each with the share of its bias that stays: exp(-travel /
-        VIEW_BIAS_RENEW_PX), travel the mean shift of its marker's predicted corners since its last frame."""
+        VIEW_BIAS_RENEW_PX), travel the mean shift of its marker's predicted corners since its last frame, but at least
+        exp(-dt / VIEW_BIAS_TAU_S), dt the time since then."""
         cam = self.cameras.get(o.camera)
         if cam is None or cam.T_jacket_camera is None:
             return []
@@ -516,8 +524,9 @@ class TopsideFilter:
                 continue
             h = self._predict_corners(cam, marker, self.x, o.K)
             travel = float(np.linalg.norm((h - view.corners).reshape(4, 2), axis=1).mean())
+            by_travel, by_time = np.exp(-travel / VIEW_BIAS_RENEW_PX), np.exp(-(o.time - view.time) / VIEW_BIAS_TAU_S)
             view.corners, view.time = h, o.time
-            out.append((view, float(np.exp(-travel / VIEW_BIAS_RENEW_PX))))
+            out.append((view, float(max(by_travel, by_time))))
         return out
 
     def _view(self, cam: CameraState, marker: int, K: np.ndarray, time: float) -> ViewBias:
