@@ -164,8 +164,10 @@ def render_installation(folder, motion, times: dict[str, np.ndarray], dist: np.n
     folder.mkdir(parents=True, exist_ok=True)
     cams = []
     centres = marker_centres()
+    poses = []  # the cameras' true poses for truth.csv: position and rotation vector, as the simulator writes them
     for name, eye in CAMERA_EYES.items():
         T_jacket_cam = look_at(eye, CONE_A + np.array([0.0, 0.0, JACKET_MARKER_Z + MATED_RISE / 2]))
+        poses.append((name, [*T_jacket_cam[:3, 3], *cv2.Rodrigues(T_jacket_cam[:3, :3])[0].reshape(3)]))
         save_camera(folder / f"calibration/{name}.yaml", CameraModel(PAPER_K, dist, *PAPER_SIZE))
         cams.append({"name": name, "calibration": f"calibration/{name}.yaml", "source": f"{name}.mp4",
                      "time_offset": float(times[name][0])})
@@ -191,6 +193,9 @@ def render_installation(folder, motion, times: dict[str, np.ndarray], dist: np.n
     (folder / "rig.yaml").write_text(yaml.safe_dump(rig_dict(cams), sort_keys=False))
     t_all = np.arange(min(t[0] for t in times.values()) - 0.1, max(t[-1] for t in times.values()) + 0.1, 0.01)
     truth = np.array([motion(t) for t in t_all])
-    lines = ["time,cone_A_dx,cone_A_dy,cone_A_dz"] + [f"{t:.4f},{a:.6f},{b:.6f},{c:.6f}"
-                                                      for t, (a, b, c) in zip(t_all, truth, strict=True)]
+    header = ["time", "cone_A_dx", "cone_A_dy", "cone_A_dz",
+              *(f"camera_{name}_{axis}" for name, _ in poses for axis in ("x", "y", "z", "rx", "ry", "rz"))]
+    still = "".join(f",{v:.6f}" for _, pose in poses for v in pose)
+    lines = [",".join(header)] + [f"{t:.4f},{a:.6f},{b:.6f},{c:.6f}{still}"
+                                  for t, (a, b, c) in zip(t_all, truth, strict=True)]
     (folder / "truth.csv").write_text("\n".join(lines) + "\n")

@@ -182,7 +182,7 @@ def track(
     rig: Annotated[Path, typer.Option(help="Rig file of the installation.")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Offsets CSV to write.")] = Path("offsets.csv"),
     mode: Annotated[str, typer.Option(help="fused: live rigid-body Kalman filter of all cameras; smoothed: the "
-                                           "same, then smoothed over the whole run (RTS); paper: the paper's "
+                                           "same, then smoothed (RTS) by the next 45 s at least; paper: the paper's "
                                            "method; raw: every camera's pair offset.")] = "fused",
     refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = DEFAULT_REFINEMENT,
     rrd: Annotated[Path | None, typer.Option(help="Also record everything to this Rerun file (.rrd).")] = None,

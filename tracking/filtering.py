@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +23,8 @@ class ConeEstimate:
     offset: np.ndarray  # (3,) dx, dy, dz in the jacket frame, m; NaN where no camera gives the axis
     cameras: tuple[str, ...]
     covariance: np.ndarray | None = None  # (3, 3) m², where the estimator knows it
+    T_jacket_cameras: Mapping[str, np.ndarray] | None = None  # (4, 4) per placed camera, where the estimator keeps
+    # the cameras' poses (the live fused filter); one mapping shared by the estimates of one time
 
 
 def paper_roles(rig: Rig) -> dict[tuple[str, str], str]:

@@ -830,7 +830,10 @@ class TopsideFilter:
                        time: float | None = None, cameras: tuple[str, ...] | None = None,
                        warming: bool | None = None) -> list[ConeEstimate]:
         """Offset and covariance at every cone from a state (default: the current one), withholding cones whose σ
-        exceeds REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_M while warming (default: whether the filter is now)."""
+        exceeds REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_M while warming (default: whether the filter is now); from
+        the current state, with the placed cameras' poses (a past state's are relative to nominals since moved)."""
+        poses = None if x is not None else {name: self._camera_pose(cam, self.x) for name, cam in self.cameras.items()
+                                            if cam.T_jacket_camera is not None}
         x = self.x if x is None else x
         P = self.P if P is None else P
         assert x is not None and P is not None
@@ -843,7 +846,7 @@ class TopsideFilter:
             H = point_offset_matrix(r)
             cov = H @ P[:STATE, :STATE] @ H.T
             offset = H @ x[:STATE] if np.sqrt(np.diag(cov)).max() <= limit else np.full(3, np.nan)
-            out.append(ConeEstimate(time, cone, offset, cameras, cov))
+            out.append(ConeEstimate(time, cone, offset, cameras, cov, poses))
         return out
 
 

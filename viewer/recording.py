@@ -7,6 +7,8 @@ Entity layout (the jacket frame is the world):
     world/cameras/<camera>/image         the frame (the camera's own H.264 packet, or JPEG), with markers/
                                          (outlines, axes, corners) and rejected/ below it
     world/estimated/<camera>             every marker's frame as that camera estimates it (boxes by id, axes)
+    world/filter/cameras/<camera>        camera pose as the fused filter has it (all cameras, over time), a frustum
+    world/truth/cameras/<camera>         camera pose in the truth log (the simulator's), a frustum
     offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, uncertainty/<axis>/<cone> (1σ),
     health/<camera>/..., status
 """
@@ -36,6 +38,9 @@ TOLERANCE_M = 0.150  # concentricity requirement (paper, section I-D)
 MARKER_THICKNESS_M = 0.01
 AXIS_LENGTH_M = 0.5
 FRUSTUM_DEPTH_M = 2.0
+FILTER_CAMERAS = "world/filter/cameras"  # where the fused filter has each camera (the frames' own are world/cameras)
+TRUTH_CAMERAS = "world/truth/cameras"  # where a truth log (the simulator's) has each camera
+TRUTH_POSE_AXES = ("x", "y", "z", "rx", "ry", "rz")  # a truth log's camera_<name>_<axis> columns: position, rotvec
 AXES = ("dx", "dy", "dz")
 AXIS_COLORS = [(230, 60, 60), (60, 200, 60), (60, 120, 240)]
 CONE_COLORS = [(255, 140, 0), (0, 170, 255), (200, 80, 255), (80, 220, 120), (255, 220, 0), (255, 90, 150)]
@@ -73,11 +78,45 @@ def log_rig(rec: rr.RecordingStream, rig: Rig) -> None:
 
 
 def log_camera_model(rec: rr.RecordingStream, name: str, camera: CameraModel) -> None:
-    """Static pinhole of one camera."""
-    rr.log(f"world/cameras/{name}", rr.Pinhole(image_from_camera=camera.K, resolution=list(camera.image_size),
-                                               camera_xyz=rr.ViewCoordinates.RDF,
-                                               image_plane_distance=FRUSTUM_DEPTH_M),
+    """Static pinhole of one camera, where its frames' images and marker poses go."""
+    log_frustum(rec, f"world/cameras/{name}", camera)
+
+
+def log_frustum(rec: rr.RecordingStream, path: str, camera: CameraModel) -> None:
+    """Static pinhole of a camera at any entity: a frustum wherever a transform puts it."""
+    rr.log(path, rr.Pinhole(image_from_camera=camera.K, resolution=list(camera.image_size),
+                            camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=FRUSTUM_DEPTH_M),
            static=True, recording=rec)
+
+
+def log_camera_poses(rec: rr.RecordingStream, path: str, times: np.ndarray, T_jacket_camera: np.ndarray) -> None:
+    """A camera's pose over time, (N, 4, 4) at (N,) capture times, columnar."""
+    if len(times):
+        rr.send_columns(path, indexes=[time_column(times)],
+                        columns=rr.Transform3D.columns(translation=T_jacket_camera[:, :3, 3],
+                                                       quaternion=quaternions_xyzw(T_jacket_camera[:, :3, :3])),
+                        recording=rec)
+
+
+def true_camera_poses(truth: pd.DataFrame, name: str) -> np.ndarray | None:
+    """(N, 4, 4) T_jacket_camera of a camera at the truth log's times, or None when the log has no pose for it."""
+    columns = [f"camera_{name}_{axis}" for axis in TRUTH_POSE_AXES]
+    if not set(columns) <= set(truth.columns):
+        return None
+    pose = truth[columns].to_numpy(dtype=float)
+    T = np.tile(np.eye(4), (len(pose), 1, 1))
+    T[:, :3, 3] = pose[:, :3]
+    T[:, :3, :3] = [cv2.Rodrigues(r)[0] for r in pose[:, 3:]]
+    return T
+
+
+def log_true_cameras(rec: rr.RecordingStream, truth: pd.DataFrame, cameras: dict[str, CameraModel]) -> None:
+    """Every camera's true pose over time, with its frustum, where the truth log has it."""
+    for name, camera in cameras.items():
+        T = true_camera_poses(truth, name)
+        if T is not None:
+            log_frustum(rec, f"{TRUTH_CAMERAS}/{name}", camera)
+            log_camera_poses(rec, f"{TRUTH_CAMERAS}/{name}", truth["time"].to_numpy(dtype=float), T)
 
 
 def encode_jpeg(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:

@@ -29,19 +29,23 @@ from viewer.blueprint import LayoutSender, analysis_blueprint
 from viewer.playback import rerun_binary
 from viewer.recording import (
     APP_ID,
+    FILTER_CAMERAS,
     JPEG_QUALITY,
     StatusBoard,
     log_archive_inputs,
     log_camera_model,
+    log_camera_poses,
     log_estimate_records,
     log_estimates,
     log_frame,
     log_frame_ages,
+    log_frustum,
     log_health,
     log_image,
     log_rig,
     log_series_styles,
     log_topside_poses,
+    log_true_cameras,
     log_truth,
     log_video_codec,
     set_capture_time,
@@ -183,6 +187,7 @@ class Recorder:
         log_archive_inputs(self.rec, self._inputs)
         for name, cam in self.cameras.items():
             log_camera_model(self.rec, name, cam)
+        self._filter_frusta: set[str] = set()  # drawn with a camera's first filtered pose (none in the paper's mode)
         for name in self._video:
             log_video_codec(self.rec, name)
         log_series_styles(self.rec, self.cones, self.truth is not None)
@@ -190,6 +195,7 @@ class Recorder:
             log_target_circle(self.rec, cone)
         if self.truth is not None and len(self._segments) <= 1:
             log_truth(self.rec, self.truth, self.cones)
+            log_true_cameras(self.rec, self.truth, self.cameras)
 
     def _rotate_if_due(self, t: float) -> None:
         """Start the next segment file when this one spans segment_s; it opens with every camera's current GOP."""
@@ -296,6 +302,16 @@ class Recorder:
                 full.setdefault(e.time, {})[e.cone] = e.offset
         log_topside_poses(self.rec, np.array(list(full)),
                           np.array([topside_pose(self._cone_points, v) for v in full.values()]).reshape(-1, 4, 4))
+        poses: dict[str, dict[float, np.ndarray]] = {}  # the estimator's camera poses, once per time
+        for e in batch:
+            for name, T in (e.T_jacket_cameras or {}).items():
+                poses.setdefault(name, {})[e.time] = T
+        for name, by_time in poses.items():
+            if name not in self._filter_frusta and name in self.cameras:
+                log_frustum(self.rec, f"{FILTER_CAMERAS}/{name}", self.cameras[name])
+                self._filter_frusta.add(name)
+            log_camera_poses(self.rec, f"{FILTER_CAMERAS}/{name}", np.array(list(by_time)),
+                             np.array(list(by_time.values())))
 
     def on_update(self, update: LiveUpdate) -> None:
         """Log a live update: its frames and estimates in capture-time order (each frame before the estimates it

@@ -13,6 +13,8 @@ import pytest
 import rerun as rr
 
 from tests.conftest import FRAMES, REPO
+from tests.synthetic import CONE_A
+from tests.viewer.conftest import Archived
 from viewer.playback import rerun_binary
 from viewer.readback import chunks_by_entity, component_rows
 
@@ -204,3 +206,20 @@ def test_a_live_update_lands_in_the_segments_that_span_its_times(installation: P
             assert not times.size or (start - 1e-6 <= times.min() and times.max() <= end + 1e-6), name
             found += times.size
     assert found == len(estimates)
+
+
+def test_the_filters_cameras_are_drawn_beside_the_true_ones(archived: Archived,
+                                                           recorded: tuple[Path, pd.DataFrame]) -> None:
+    """The fused run draws where its filter has each camera, over time, and where the truth log has it; the paper's
+    mode, which keeps no camera poses, draws none."""
+    chunks = chunks_by_entity(archived.rrd)
+    for cam in ("cam-ahead", "cam-port"):
+        _, estimated = component_rows(chunks[f"/world/filter/cameras/{cam}"], "Transform3D:translation")
+        _, true = component_rows(chunks[f"/world/truth/cameras/{cam}"], "Transform3D:translation")
+        _, pinholes = component_rows(chunks[f"/world/filter/cameras/{cam}"], "Pinhole:image_from_camera")
+        assert len(estimated) > 10 and len(true) > 10 and len(pinholes) == 1
+        estimated, true = np.array([r[0] for r in estimated]), np.array([r[0] for r in true])
+        distance = np.linalg.norm(true[0] - CONE_A)
+        error = np.linalg.norm(estimated[-1] - true[-1])
+        assert error < 0.005 * distance  # 22 mm at 20.6 m
+    assert not any(p.startswith("/world/filter") for p in chunks_by_entity(recorded[0]))
