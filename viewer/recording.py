@@ -77,11 +77,6 @@ def log_rig(rec: rr.RecordingStream, rig: Rig) -> None:
                static=True, recording=rec)
 
 
-def log_camera_model(rec: rr.RecordingStream, name: str, camera: CameraModel) -> None:
-    """Static pinhole of one camera, where its frames' images and marker poses go."""
-    log_frustum(rec, f"world/cameras/{name}", camera)
-
-
 def log_frustum(rec: rr.RecordingStream, path: str, camera: CameraModel) -> None:
     """Static pinhole of a camera at any entity: a frustum wherever a transform puts it."""
     rr.log(path, rr.Pinhole(image_from_camera=camera.K, resolution=list(camera.image_size),

@@ -33,7 +33,6 @@ from viewer.recording import (
     JPEG_QUALITY,
     StatusBoard,
     log_archive_inputs,
-    log_camera_model,
     log_camera_poses,
     log_estimate_records,
     log_estimates,
@@ -186,7 +185,7 @@ class Recorder:
         log_rig(self.rec, self.rig)
         log_archive_inputs(self.rec, self._inputs)
         for name, cam in self.cameras.items():
-            log_camera_model(self.rec, name, cam)
+            log_frustum(self.rec, f"world/cameras/{name}", cam)  # where its frames' images and marker poses go
         self._filter_frusta: set[str] = set()  # drawn with a camera's first filtered pose (none in the paper's mode)
         for name in self._video:
             log_video_codec(self.rec, name)
