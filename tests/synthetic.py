@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from tracking.sim.transforms import T_to_pose
+
 SUPERSAMPLE = 8
 BACKGROUND = 90
 WHITE = 235
@@ -167,7 +169,7 @@ def render_installation(folder, motion, times: dict[str, np.ndarray], dist: np.n
     poses = []  # the cameras' true poses for truth.csv: position and rotation vector, as the simulator writes them
     for name, eye in CAMERA_EYES.items():
         T_jacket_cam = look_at(eye, CONE_A + np.array([0.0, 0.0, JACKET_MARKER_Z + MATED_RISE / 2]))
-        poses.append((name, [*T_jacket_cam[:3, 3], *cv2.Rodrigues(T_jacket_cam[:3, :3])[0].reshape(3)]))
+        poses.append((name, T_to_pose(T_jacket_cam)))
         save_camera(folder / f"calibration/{name}.yaml", CameraModel(PAPER_K, dist, *PAPER_SIZE))
         cams.append({"name": name, "calibration": f"calibration/{name}.yaml", "source": f"{name}.mp4",
                      "time_offset": float(times[name][0])})

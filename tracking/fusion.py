@@ -38,6 +38,7 @@ import bisect
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from statistics import NormalDist
 
 import cv2
 import numpy as np
@@ -103,7 +104,6 @@ PLACEMENT_FIT_P = 0.99  # a view places a camera or the topside only if its pose
 # CORNER_NOISE_PX would at this probability (χ² of the RMS over 8 N - 6 degrees of freedom, N markers): nothing
 # else checks the first view. One rain-hit corner (2.7 px) in the view that placed a stern camera left an
 # RMS of 0.35 px (clean views: 0.03 median) and put the topside 145 mm off at 6σ (procedure 3, CRF 16)
-Z_99 = 2.3263  # standard normal quantile of PLACEMENT_FIT_P
 
 
 @dataclass(frozen=True)
@@ -244,7 +244,8 @@ def fits_its_corners(pose: BodyPose) -> bool:
     over the corners its fit kept (Wilson-Hilferty's χ² quantile, within 1 % from 2 degrees of freedom up)."""
     points = 8 * len(pose.marker_ids) - 2 * pose.outliers  # coordinates of the corners the fit kept
     dof = points - 6
-    quantile = dof * (1.0 - 2.0 / (9 * dof) + Z_99 * np.sqrt(2.0 / (9 * dof))) ** 3
+    z = NormalDist().inv_cdf(PLACEMENT_FIT_P)
+    quantile = dof * (1.0 - 2.0 / (9 * dof) + z * np.sqrt(2.0 / (9 * dof))) ** 3
     return pose.reprojection_error**2 * points <= quantile * CORNER_NOISE_PX**2
 
 

@@ -30,6 +30,7 @@ from tracking.images import Frame
 from tracking.pipeline import FrameResult
 from tracking.pose import Choice, MarkerPose
 from tracking.rig import Rig
+from tracking.sim.transforms import pose_to_T
 
 APP_ID = "topside"
 TIMELINE = "capture_time"
@@ -40,7 +41,8 @@ AXIS_LENGTH_M = 0.5
 FRUSTUM_DEPTH_M = 2.0
 FILTER_CAMERAS = "world/filter/cameras"  # where the fused filter has each camera (the frames' own are world/cameras)
 TRUTH_CAMERAS = "world/truth/cameras"  # where a truth log (the simulator's) has each camera
-TRUTH_POSE_AXES = ("x", "y", "z", "rx", "ry", "rz")  # a truth log's camera_<name>_<axis> columns: position, rotvec
+TRUTH_POSE_AXES = ("x", "y", "z", "rx", "ry", "rz")  # a truth log's camera_<name>_<axis> columns (the simulator's
+# pose vector: position, rotation vector)
 AXES = ("dx", "dy", "dz")
 AXIS_COLORS = [(230, 60, 60), (60, 200, 60), (60, 120, 240)]
 CONE_COLORS = [(255, 140, 0), (0, 170, 255), (200, 80, 255), (80, 220, 120), (255, 220, 0), (255, 90, 150)]
@@ -98,11 +100,7 @@ def true_camera_poses(truth: pd.DataFrame, name: str) -> np.ndarray | None:
     columns = [f"camera_{name}_{axis}" for axis in TRUTH_POSE_AXES]
     if not set(columns) <= set(truth.columns):
         return None
-    pose = truth[columns].to_numpy(dtype=float)
-    T = np.tile(np.eye(4), (len(pose), 1, 1))
-    T[:, :3, 3] = pose[:, :3]
-    T[:, :3, :3] = [cv2.Rodrigues(r)[0] for r in pose[:, 3:]]
-    return T
+    return np.array([pose_to_T(pose) for pose in truth[columns].to_numpy(dtype=float)]).reshape(-1, 4, 4)
 
 
 def log_true_cameras(rec: rr.RecordingStream, truth: pd.DataFrame, cameras: dict[str, CameraModel]) -> None:

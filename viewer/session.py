@@ -306,7 +306,7 @@ class Recorder:
             for name, T in (e.T_jacket_cameras or {}).items():
                 poses.setdefault(name, {})[e.time] = T
         for name, by_time in poses.items():
-            if name not in self._filter_frusta and name in self.cameras:
+            if name not in self._filter_frusta:
                 log_frustum(self.rec, f"{FILTER_CAMERAS}/{name}", self.cameras[name])
                 self._filter_frusta.add(name)
             log_camera_poses(self.rec, f"{FILTER_CAMERAS}/{name}", np.array(list(by_time)),

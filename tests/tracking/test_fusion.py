@@ -426,9 +426,9 @@ def test_a_views_bias_stays_while_its_image_stays() -> None:
         for key, view in kf.views.items():
             if view.time == o.time > 8.0 and view.index - kf.body_size < F.keep.size:
                 keeps.setdefault(key, []).append(float(F.keep[view.index - kf.body_size]))
-    assert np.median(keeps["far", 0]) > 0.9  # jacket marker 0 at cone A, ahead: the far camera's on a vessel, still
     floor = np.exp(-1 / 15 / VIEW_BIAS_TAU_S)  # the share of a time constant that stays over one frame at 15 FPS
-    assert np.median(keeps["far", 0]) > floor + 0.02
+    assert np.median(keeps["far", 0]) > max(0.9, floor + 0.02)  # jacket marker 0 at cone A, ahead: the far camera's
+    # on a vessel, still, so its travel keeps more than the floor would
     assert np.median(keeps["side", 3]) == pytest.approx(floor, abs=1e-3)  # topside marker 3 at cone A, port: moving
     # astern across the side view, where travel alone would keep less than 10 %
 
