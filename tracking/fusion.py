@@ -80,11 +80,12 @@ VIEW_BIAS_RENEW_PX = 0.5  # that part renews as the marker's image moves: exp(-t
 # which did better than for ever (procedure 1, before the placement check: 48 against 102 mm) while the topside
 # markers' corners share a bias the model leaves out (see the README)
 VIEW_BIAS_TAU_S = 0.5  # ... but no faster than with this time constant, however far the image travels. A drone's
-# views travel 1.2-1.5 px a frame, and renewed by travel alone their biases counted as white noise: the keystone of a
+# views travel 1.1-1.5 px a frame, and renewed by travel alone their biases counted as white noise: the keystone of a
 # drone's one marker then set its swing about it, and with it x at cone A, 56 mm off at 3σ in procedure 5's first
 # seconds (a marker's own cells and the stream's motion-compensated coding move with the marker, not with the pixel
 # grid). Chosen on the accuracy benchmark, procedure 5's largest error at 0.25 / 0.5 / 1 s: 47 / 40 / 40 mm (CRF 22).
-# It says more than the corners' statistics do (per coordinate, 95 % of a drone view's error variance is white), so
+# It says more than the corners' statistics do (a drone view's per-coordinate autocorrelation: 0.2 at one frame,
+# at most 0.06 from three on), so
 # σ is conservative in configuration 2: beyond 2σ lie 0.2-0.5 % of the errors there (a Gaussian: 4.6 %)
 CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
 # (1-4 % of corners are > 1 px off in rain: a heavy tail a Gaussian would follow)
