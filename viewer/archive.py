@@ -8,6 +8,8 @@ Channels (Foxglove schemas in protobuf encoding, log time = capture time):
     /frames/markers                  foxglove.FrameTransforms jacket -> marker_<id>, topside -> marker_<id>
     /frames/cameras                  foxglove.FrameTransforms jacket -> <camera> as the markers place it
     /frames/topside                  foxglove.FrameTransforms jacket -> topside (fitted to the cone offsets)
+    /frames/filter_cameras           foxglove.FrameTransforms jacket -> filter_<camera>: where the fused filter has
+                                     each camera (live mode), once per estimate time
     /offsets/<cone>                  topside.ConeOffset: dx dy dz, 1σ, covariance (3x3, m²), status, cameras
     /truth/<cone>                    topside.ConeOffset: the simulator's truth, when known
     /log                             foxglove.Log: events (start, first frame, markers lost/found, cone state)
@@ -90,6 +92,7 @@ TEXT_PX = 14.0
 NS = 1_000_000_000
 DISTORTION_MODELS = {5: "plumb_bob", 8: "rational_polynomial"}
 VIDEO_FORMATS = ("jpeg", "h264")
+FILTER_FRAME_PREFIX = "filter_"  # the fused filter's camera frames, beside the markers' own <camera> frames
 H264_CRF = 23  # x264's default quality
 H264_PRESET = "superfast"  # 10 ms per 920x600 frame on one core; veryfast: 14 ms, 15 % smaller
 KEYFRAME_PERIOD_S = 1.0  # a keyframe (with SPS/PPS) every second: seeking and recovery start there
@@ -406,6 +409,13 @@ def as_f32(a: np.ndarray) -> np.ndarray:
     return np.asarray(a, dtype=np.float32).astype(np.float64)
 
 
+def as_f32_pose(T: np.ndarray) -> np.ndarray:
+    """A pose (4, 4) with its rotation and translation rounded as an .rrd stores them."""
+    out = np.array(T, dtype=np.float64)
+    out[:3, :] = as_f32(out[:3, :])
+    return out
+
+
 def frame_view(rig: Rig, camera: CameraModel, result: FrameResult, jpeg_quality: int = JPEG_QUALITY) -> FrameView:
     """The archive's view of a tracker result: the same image, outlines and axes that viewer/recording.py logs."""
     if result.frame.packet is not None:
@@ -421,7 +431,7 @@ def frame_view(rig: Rig, camera: CameraModel, result: FrameResult, jpeg_quality:
                                                     strict=True)]
     T = camera_pose_from_markers(rig, result)
     if T is not None:
-        T = np.vstack([np.hstack([as_f32(T[:3, :3]), as_f32(T[:3, 3:])]), [0, 0, 0, 1]])
+        T = as_f32_pose(T)
     errs = [p.reprojection_error for p in result.poses.values()]
     return FrameView(result.camera, capture_ns(result.time), result.frame.index, data,
                      outlines, axes, T, len(result.poses), float(np.mean(errs)) if errs else float("nan"), fmt)
@@ -516,6 +526,7 @@ class Archive:
         self._latest: dict[str, np.ndarray] = {}
         self._last_flush: int | None = None
         self._frames: dict[str, int] = {}
+        self._filter_cameras_ns: int | None = None
 
     def _advance(self, ns: int) -> int:
         """Before anything at capture time ns: static frames when due, truth up to ns, a chunk to disk when due."""
@@ -578,8 +589,8 @@ class Archive:
         self._frames[name] = self._frames.get(name, 0) + 1
 
     def estimate(self, estimate: ConeEstimate, ns: int | None = None) -> None:
-        """One cone's offset with covariance and status (at ns, default its capture time); the topside frame; a log
-        line when the cone's state changes."""
+        """One cone's offset with covariance and status (at ns, default its capture time); the topside frame; the
+        filter's camera frames; a log line when the cone's state changes."""
         ns = self._advance(capture_ns(estimate.time) if ns is None else ns)
         cov = estimate.covariance
         sd = np.sqrt(np.diag(cov)) if cov is not None else np.full(3, np.nan)
@@ -596,9 +607,13 @@ class Archive:
         self._latest[estimate.cone] = estimate.offset
         full = {c: o for c, o in self._latest.items() if np.all(np.isfinite(o))}
         if full:
-            T = topside_pose(self._cone_points, full)  # as the .rrd's world/topside
-            T[:3, :] = as_f32(T[:3, :])
+            T = as_f32_pose(topside_pose(self._cone_points, full))  # as the .rrd's world/topside
             self.file.write("/frames/topside", FrameTransforms(transforms=[transform("jacket", "topside", T, ns)]), ns)
+        if estimate.T_jacket_cameras and ns != self._filter_cameras_ns:  # one mapping per time, shared by its cones
+            self._filter_cameras_ns = ns
+            self.file.write("/frames/filter_cameras", FrameTransforms(transforms=[
+                transform("jacket", f"{FILTER_FRAME_PREFIX}{name}", as_f32_pose(T), ns)
+                for name, T in sorted(estimate.T_jacket_cameras.items())]), ns)
 
     def close(self, offsets_csv: bytes | None = None) -> dict:
         """Remaining truth, the time span, the offsets CSV, then the manifest and summary. Returns the manifest."""

@@ -2,8 +2,9 @@
 rerun's API and fed to the same Archive that `track --mcap` feeds, so both archives hold the same messages.
 
 What the .rrd keeps for this (viewer/recording.py): the rig and calibration files and the tracker's options
-(`archive/inputs`), every estimate whole (`archive/estimates/<cone>`), and per frame the JPEG, the marker outlines
-and axes, the camera pose, the marker count and the reprojection error.
+(`archive/inputs`), every estimate whole (`archive/estimates/<cone>`) with the filter's camera poses at its time
+(`world/filter/cameras/<camera>`), and per frame the JPEG, the marker outlines and axes, the camera pose, the marker
+count and the reprojection error.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from tracking.filtering import ConeEstimate
 from tracking.rig import load_rig
 from viewer.archive import Archive, ArchiveInputs, FrameView
 from viewer.readback import chunks_by_entity
-from viewer.recording import AXES, TIMELINE
+from viewer.recording import AXES, FILTER_CAMERAS, TIMELINE
 
 Rows = dict[int, dict[str, object]]  # capture time ns -> component -> row value
 
@@ -70,7 +71,7 @@ def frame_views(chunks: dict[str, list[rr.chunk.Chunk]], camera: str) -> list[Fr
                          f"frame_{camera}")
     overlays = entity_rows(chunks.get(f"{base}/image/markers", []),
                            ["LineStrips2D:strips", "LineStrips2D:labels", "LineStrips2D:colors"])
-    poses = entity_rows(chunks.get(base, []), ["Transform3D:translation", "Transform3D:mat3x3"])
+    poses = pose_rows(chunks.get(base, []))
     counts = entity_rows(chunks.get(f"/health/{camera}/markers", []), ["Scalars:scalars"])
     reproj = entity_rows(chunks.get(f"/health/{camera}/reprojection_error_px", []), ["Scalars:scalars"])
     views = []
@@ -91,13 +92,7 @@ def frame_views(chunks: dict[str, list[rr.chunk.Chunk]], camera: str) -> list[Fr
                     outlines.append((int(label), strip[:4], _rgb(c)))
                 else:
                     segments.append((strip, _rgb(c)))
-        T = None
-        p = poses.get(ns, {})
-        if "Transform3D:translation" in p and "Transform3D:mat3x3" in p:
-            T = np.eye(4)
-            # rerun stores mat3x3 column-major
-            T[:3, :3] = np.array(p["Transform3D:mat3x3"].as_py()[0], dtype=np.float64).reshape(3, 3).T
-            T[:3, 3] = np.array(p["Transform3D:translation"].as_py()[0], dtype=np.float64)
+        T = poses.get(ns)
         n = counts.get(ns, {}).get("Scalars:scalars")
         r = reproj.get(ns, {}).get("Scalars:scalars")
         views.append(FrameView(camera, ns, int(row.get(f"frame_{camera}", len(views))), image,
@@ -106,8 +101,33 @@ def frame_views(chunks: dict[str, list[rr.chunk.Chunk]], camera: str) -> list[Fr
     return views
 
 
+def pose_rows(chunks: list[rr.chunk.Chunk]) -> dict[int, np.ndarray]:
+    """An entity's transforms (4, 4) by capture time (ns), where it has both translation and matrix."""
+    out = {}
+    for ns, row in entity_rows(chunks, ["Transform3D:translation", "Transform3D:mat3x3"]).items():
+        if "Transform3D:translation" in row and "Transform3D:mat3x3" in row:
+            T = np.eye(4)
+            # rerun stores mat3x3 column-major
+            T[:3, :3] = np.array(row["Transform3D:mat3x3"].as_py()[0], dtype=np.float64).reshape(3, 3).T
+            T[:3, 3] = np.array(row["Transform3D:translation"].as_py()[0], dtype=np.float64)
+            out[ns] = T
+    return out
+
+
+def filter_cameras(chunks: dict[str, list[rr.chunk.Chunk]]) -> dict[int, dict[str, np.ndarray]]:
+    """Where the fused filter had each camera, by capture time (ns): camera -> T_jacket_camera (4, 4)."""
+    prefix = f"/{FILTER_CAMERAS}/"
+    out: dict[int, dict[str, np.ndarray]] = {}
+    for path, entity_chunks in sorted(chunks.items()):
+        if path.startswith(prefix):
+            for ns, T in pose_rows(entity_chunks).items():
+                out.setdefault(ns, {})[path[len(prefix):]] = T
+    return out
+
+
 def estimates(chunks: dict[str, list[rr.chunk.Chunk]]) -> list[tuple[int, ConeEstimate]]:
-    """Every estimate the recording stores whole, with its capture time in ns."""
+    """Every estimate the recording stores whole, with its capture time in ns and the filter's cameras then."""
+    cameras = filter_cameras(chunks)
     out = []
     prefix = "/archive/estimates/"
     for path, entity_chunks in chunks.items():
@@ -120,10 +140,11 @@ def estimates(chunks: dict[str, list[rr.chunk.Chunk]]) -> list[tuple[int, ConeEs
         rows = entity_rows(entity_chunks, list(keys.values()))
         for ns, row in sorted(rows.items()):
             cov = np.array(row[keys["covariance"]].as_py(), dtype=np.float64) if keys["covariance"] in row else None
-            cameras = row[keys["cameras"]].as_py()[0] if keys["cameras"] in row else ""
+            names = row[keys["cameras"]].as_py()[0] if keys["cameras"] in row else ""
             out.append((ns, ConeEstimate(ns / 1e9, cone, np.array(row[keys["offset"]].as_py(), dtype=np.float64),
-                                         tuple(cameras.split()) if cameras else (),
-                                         cov.reshape(3, 3) if cov is not None and cov.size == 9 else None)))
+                                         tuple(names.split()) if names else (),
+                                         cov.reshape(3, 3) if cov is not None and cov.size == 9 else None,
+                                         cameras.get(ns))))
     return out
 
 

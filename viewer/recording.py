@@ -87,11 +87,12 @@ def log_frustum(rec: rr.RecordingStream, path: str, camera: CameraModel) -> None
 
 
 def log_camera_poses(rec: rr.RecordingStream, path: str, times: np.ndarray, T_jacket_camera: np.ndarray) -> None:
-    """A camera's pose over time, (N, 4, 4) at (N,) capture times, columnar."""
+    """A camera's pose over time, (N, 4, 4) at (N,) capture times, columnar (as a matrix, which `topside export`
+    reads back)."""
     if len(times):
         rr.send_columns(path, indexes=[time_column(times)],
                         columns=rr.Transform3D.columns(translation=T_jacket_camera[:, :3, 3],
-                                                       quaternion=quaternions_xyzw(T_jacket_camera[:, :3, :3])),
+                                                       mat3x3=T_jacket_camera[:, :3, :3]),
                         recording=rec)
 
 

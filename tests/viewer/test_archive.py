@@ -94,6 +94,14 @@ def test_round_trip_through_mcap_reader(archived: Archived, installation: Path) 
     markers_tf = {ft.child_frame_id: ft.parent_frame_id for _, m in msgs["/frames/markers"] for ft in m.transforms}
     assert markers_tf == {"marker_1": "jacket", "marker_2": "topside", "marker_3": "jacket", "marker_4": "topside"}
     assert msgs["/frames/topside"][-1][1].transforms[0].translation.x == pytest.approx(df["dx"].iloc[-1], abs=1e-5)
+    filter_tf = msgs["/frames/filter_cameras"]  # the fused filter's cameras, once per estimate time
+    assert len(filter_tf) == len(set(df["time"])) and all(m.transforms for _, m in filter_tf)
+    last = {ft.child_frame_id: ft for ft in filter_tf[-1][1].transforms}
+    assert set(last) == {f"filter_{cam}" for cam in CAMERAS}
+    for cam in CAMERAS:
+        true = truth[[f"camera_{cam}_{a}" for a in ("x", "y", "z")]].to_numpy()[-1]
+        t = last[f"filter_{cam}"].translation
+        assert np.linalg.norm([t.x - true[0], t.y - true[1], t.z - true[2]]) < 0.005 * np.linalg.norm(true)
     log = [m.message for _, m in msgs["/log"]]
     assert log[0].startswith("archive of") and log[-1] == "archive closed"
     assert any(line.startswith("cone A:") for line in log)
@@ -145,7 +153,7 @@ def test_rerun_checks_and_converts_the_archive(archived: Archived, tmp_path: Pat
                            timeout=60)
     assert check.returncode == 0, check.stderr
     rows = [line.split() for line in check.stdout.splitlines() if line.strip().startswith(("ok", "warn", "error"))]
-    assert len(rows) == 14 and all(r[0] == "ok" for r in rows), check.stdout
+    assert len(rows) == 15 and all(r[0] == "ok" for r in rows), check.stdout
     rrd = tmp_path / "converted.rrd"
     conv = subprocess.run([rerun_binary(), "mcap", "convert", str(archived.mcap), "-o", str(rrd),
                            "--timeline-type", "duration"], capture_output=True, text=True, timeout=60)
@@ -164,6 +172,8 @@ def test_rerun_checks_and_converts_the_archive(archived: Archived, tmp_path: Pat
     cams = columns["/frames/cameras"]
     assert len(cams["Transform3D:translation"]) == 2 * FRAMES
     assert {f[0] for f in cams["Transform3D:child_frame"]} == set(CAMERAS)
+    assert {f[0] for f in columns["/frames/filter_cameras"]["Transform3D:child_frame"]} == \
+        {f"filter_{cam}" for cam in CAMERAS}
     markers = columns["/frames/markers"]
     assert {f[0]: p[0] for f, p in zip(markers["Transform3D:child_frame"], markers["Transform3D:parent_frame"],
                                        strict=True)} == {"marker_1": "jacket", "marker_2": "topside",
