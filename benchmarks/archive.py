@@ -59,7 +59,8 @@ def main() -> None:
         results.append(r)
         if len(results) >= MAX_FRAMES:
             break
-    estimates = list(ESTIMATORS["fused"](rig, (o for r in results for o in r.offsets)))
+    estimates = list(ESTIMATORS["fused"](rig, (m for r in results  # as `topside track` feeds it
+                                               for m in [*r.offsets, *([r.observation] if r.observation else [])])))
     events = sorted([(r.time, 0, i) for i, r in enumerate(results)] + [(e.time, 1, i) for i, e in enumerate(estimates)])
     span = {}
     for r in results:
