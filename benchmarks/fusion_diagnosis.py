@@ -31,6 +31,8 @@ from accuracy import CACHE, RESULTS, RUNS, WEATHER, measure, with_mounts
 from tracking import fusion
 from tracking.evaluate import truth_at
 from tracking.rig import load_rig
+from tracking.sim.transforms import pose_to_T
+from viewer.recording import TRUTH_POSE_AXES
 
 OUT = RESULTS.parent / "fusion_diagnosis.md"
 STARTUP_S = 3.0
@@ -51,11 +53,8 @@ class TrueCameras(fusion.TopsideFilter):
         assert self.x is not None and self.P is not None and self.time is not None
         t = self.truth["time"].to_numpy()
         for name, cam in self.cameras.items():
-            p = [np.interp(self.time, t, self.truth[f"camera_{name}_{a}"]) for a in ("x", "y", "z", "rx", "ry", "rz")]
-            T = np.eye(4)
-            T[:3, :3] = fusion.rotation(np.array(p[3:]))
-            T[:3, 3] = p[:3]
-            cam.T_jacket_camera = T
+            cam.T_jacket_camera = pose_to_T(np.array([np.interp(self.time, t, self.truth[f"camera_{name}_{a}"])
+                                                      for a in TRUTH_POSE_AXES]))
             b = slice(cam.index, cam.index + fusion.STATE)
             self.x[b] = 0.0
             self.P[b, :] = 0.0
