@@ -17,34 +17,24 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pandas as pd
 
-from tests import synthetic
-from tests.synthetic import PAPER_K, PAPER_SIZE, PlacedMarker, render, true_corners
+from benchmarks.corners import marker_pose
+from tests.synthetic import BACKGROUND, PAPER_K, PAPER_SIZE, WHITE, PlacedMarker, render, true_corners
 from tracking.camera import CameraModel
 from tracking.corners import refine_corners
 
 RESULTS = Path(__file__).resolve().parent / "results" / "corner_scale.md"
 CELL_PX = (2.8, 3.5, 4.2, 5.3, 7.0)  # cell width in the image
 BLURS = (0.0, 0.7, 1.0)  # Gaussian σ, px
-SURROUNDS = {"one white cell, then grey": synthetic.BACKGROUND, "white all round": synthetic.WHITE}
+SURROUNDS = {"one white cell, then grey": BACKGROUND, "white all round": WHITE}
 IDS = (0, 1, 4, 7, 9, 23, 42, 101)
 PLACEMENTS = 6
 START_NOISE_PX = 0.3
 ROLL_RANGE_DEG = (5.0, 40.0)
 CELLS = 8  # cells across the black square (6x6 bits + border)
 SEED = 20261122
-
-
-def marker_pose(distance: float, u: float, v: float, roll: float) -> np.ndarray:
-    """T_camera_marker (4, 4): facing the camera, centred on pixel (u, v) at `distance`, rolled by `roll` degrees."""
-    T = np.eye(4)
-    T[:3, :3] = cv2.Rodrigues(np.array([np.pi, 0.0, 0.0]))[0] @ cv2.Rodrigues(np.array([0.0, 0.0, np.radians(roll)]))[0]
-    T[:3, 3] = [(u - PAPER_K[0, 2]) / PAPER_K[0, 0] * distance, (v - PAPER_K[1, 2]) / PAPER_K[1, 1] * distance,
-                distance]
-    return T
 
 
 def scale_error(corners: np.ndarray, truth: np.ndarray) -> float:
@@ -59,7 +49,6 @@ def run() -> pd.DataFrame:
     camera = CameraModel(K=PAPER_K, dist=np.zeros(5), width=PAPER_SIZE[0], height=PAPER_SIZE[1])
     rows = []
     for surround, background in SURROUNDS.items():
-        synthetic.BACKGROUND = background
         for blur in BLURS:
             for cell in CELL_PX:
                 distance = PAPER_K[0, 0] * 1.0 / CELLS / cell
@@ -68,14 +57,13 @@ def run() -> pd.DataFrame:
                     for _ in range(PLACEMENTS):
                         roll = rng.uniform(*ROLL_RANGE_DEG) * rng.choice([-1.0, 1.0])
                         u, v = rng.uniform(300, 620), rng.uniform(200, 400)
-                        placed = PlacedMarker(marker_id, marker_pose(distance, u, v, roll), 1.0)
-                        gray = render(PAPER_K, np.zeros(5), PAPER_SIZE, [placed], blur=blur)
+                        placed = PlacedMarker(marker_id, marker_pose(distance, 0.0, u, v, roll), 1.0)
+                        gray = render(PAPER_K, np.zeros(5), PAPER_SIZE, [placed], blur=blur, background=background)
                         truth = true_corners(PAPER_K, np.zeros(5), placed)
                         start = truth + rng.normal(0, START_NOISE_PX, truth.shape)
                         errors.append(scale_error(refine_corners(gray, start, camera), truth))
                     rows.append({"surround": surround, "blur px": blur, "cell px": cell, "distance m": distance,
                                  "id": marker_id, "scale": float(np.mean(errors))})
-    synthetic.BACKGROUND = SURROUNDS["one white cell, then grey"]
     return pd.DataFrame(rows)
 
 

@@ -48,10 +48,10 @@ def true_corners(K: np.ndarray, dist: np.ndarray, m: PlacedMarker) -> np.ndarray
 
 def render(K: np.ndarray, dist: np.ndarray, size: tuple[int, int], markers: list[PlacedMarker],
            dictionary: int = cv2.aruco.DICT_6X6_250, noise: float = 0.0, blur: float = 0.0,
-           seed: int = 0, ss: int = SUPERSAMPLE) -> np.ndarray:
+           seed: int = 0, ss: int = SUPERSAMPLE, background: float = BACKGROUND) -> np.ndarray:
     """Grayscale (H, W) uint8 image of the markers on a plain background (markers must not overlap)."""
     w, h = size
-    image = np.full((h, w), float(BACKGROUND))
+    image = np.full((h, w), float(background))
     for m in sorted(markers, key=lambda m: -m.T_camera_marker[2, 3]):
         if m.T_camera_marker[:3, 2] @ m.T_camera_marker[:3, 3] >= 0:
             continue  # seen from behind
