@@ -422,8 +422,10 @@ class CameraRenderer:
         return None if (P[:, 2] < NEAR).any() else self._project(P)
 
     def finish(self, canvas: np.ndarray, state: FrameState) -> np.ndarray:
-        """Distort the ideal canvas into the picture and add blur, rain and noise."""
+        """Distort the ideal canvas into the picture and add the lens's and the motion's blur, rain and noise."""
         img = cv2.remap(canvas, *self.maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        if self.weather.lens_blur > 0:
+            img = cv2.GaussianBlur(img, (0, 0), self.weather.lens_blur)
         if self.weather.motion_blur:
             img = motion_blur(img, *state.blur_px)
         if self.weather.rain > 0:

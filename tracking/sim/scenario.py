@@ -122,6 +122,7 @@ class WeatherSpec(_Model):
     sun_azimuth: float = 290.0  # degrees from +x (port) toward +y (astern): 290 = ahead, a little to port
     sun_elevation: float = Field(35.0, ge=-5, le=90)  # degrees
     motion_blur: bool = True
+    lens_blur: float = Field(0.0, ge=0, le=5)  # optical blur (lens, sensor), Gaussian σ in pixels; 0: ideal pixels
     crf: int = Field(22, ge=0, le=51)  # H.264 constant rate factor: 1.6-1.7 Mbit/s per 920×600 camera at 15 FPS
     preset: Literal["ultrafast", "superfast", "veryfast", "faster", "fast", "medium"] = "veryfast"
 
