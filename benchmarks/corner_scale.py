@@ -1,4 +1,5 @@
-"""Corner scale bias by cell size, blur and surround: how much too small or too large the edge fit reads a marker.
+"""Corner scale bias by cell size, blur and surround: how much too small or too large the edge fit reads a marker,
+with the area edge (`--refine edges`, the default) and with the blurred-profile model (`--refine blurred`).
 
 A marker's scale error is the least-squares factor between its corner errors and its true centre-to-corner
 vectors (‰; negative = reads small = too far away). Each row renders 1 m DICT_6X6_250 markers facing the camera
@@ -9,7 +10,7 @@ have two cells of quiet zone). Per id, the scale errors are averaged over PLACEM
 lowest and highest of those per-id means, and the depth column what the mean scale error makes of a marker's
 depth at that cell size with the paper's camera (PAPER_K, f = 1258 px: depth = f × 0.125 m / cell).
 
-    .venv/bin/python -m benchmarks.corner_scale    # ~1 min, writes benchmarks/results/corner_scale.md
+    .venv/bin/python -m benchmarks.corner_scale    # ~2 min, writes benchmarks/results/corner_scale.md
 """
 
 from __future__ import annotations
@@ -61,9 +62,11 @@ def run() -> pd.DataFrame:
                         gray = render(PAPER_K, np.zeros(5), PAPER_SIZE, [placed], blur=blur, background=background)
                         truth = true_corners(PAPER_K, np.zeros(5), placed)
                         start = truth + rng.normal(0, START_NOISE_PX, truth.shape)
-                        errors.append(scale_error(refine_corners(gray, start, camera), truth))
+                        errors.append([scale_error(refine_corners(gray, start, camera, blur_model=model), truth)
+                                       for model in (False, True)])
+                    edges, blurred = np.mean(errors, axis=0)
                     rows.append({"surround": surround, "blur px": blur, "cell px": cell, "distance m": distance,
-                                 "id": marker_id, "scale": float(np.mean(errors))})
+                                 "id": marker_id, "scale": edges, "scale blurred": blurred})
     return pd.DataFrame(rows)
 
 
@@ -71,14 +74,19 @@ def report(df: pd.DataFrame, seconds: float) -> str:
     """The markdown report: per surround, blur and cell size, the scale error over ids and its depth error."""
     g = df.groupby(["surround", "blur px", "cell px"], sort=False)
     table = g.agg(distance=("distance m", "first"), mean=("scale", "mean"), low=("scale", "min"),
-                  high=("scale", "max")).reset_index()
+                  high=("scale", "max"), b_mean=("scale blurred", "mean"), b_low=("scale blurred", "min"),
+                  b_high=("scale blurred", "max")).reset_index()
     lines = ["# Corner scale bias by cell size, blur and surround", "", __doc__.split("\n\n")[0].strip(), "",
              f"{len(IDS)} ids × {PLACEMENTS} placements per row; run time {seconds:.0f} s.", "",
-             "| surround | blur σ px | cell px | depth m | scale error ‰ (mean over ids) | ids: lowest, highest ‰ "
-             "| depth error mm |", "| --- | --- | --- | --- | --- | --- | --- |"]
+             "| surround | blur σ px | cell px | depth m | edges: scale error ‰ (mean over ids) "
+             "| ids: lowest, highest ‰ | depth error mm | blurred: scale error ‰ | ids: lowest, highest ‰ "
+             "| depth error mm |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in table.itertuples():
         lines.append(f"| {r.surround} | {r._2:.1f} | {r._3:.1f} | {r.distance:.1f} | {r.mean * 1e3:+.2f} "
-                     f"| {r.low * 1e3:+.2f}, {r.high * 1e3:+.2f} | {-r.mean * r.distance * 1e3:+.0f} |")
+                     f"| {r.low * 1e3:+.2f}, {r.high * 1e3:+.2f} | {-r.mean * r.distance * 1e3:+.0f} "
+                     f"| {r.b_mean * 1e3:+.2f} | {r.b_low * 1e3:+.2f}, {r.b_high * 1e3:+.2f} "
+                     f"| {-r.b_mean * r.distance * 1e3:+.0f} |")
     return "\n".join(lines) + "\n"
 
 

@@ -22,6 +22,12 @@ class Refinement(StrEnum):
     CONTOUR = "contour"
     APRILTAG = "apriltag"
     EDGES = "edges"  # OpenCV's detector with EDGES_START, then the edge fit of tracking.corners
+    BLURRED = "blurred"  # the same edge fit with its blurred-profile model on small cells (blurry lenses)
+
+    @property
+    def fits_edges(self) -> bool:
+        """Whether corners get tracking.corners' edge fit."""
+        return self in (Refinement.EDGES, Refinement.BLURRED)
 
 
 _CV_REFINE = {
@@ -83,7 +89,7 @@ def detector_parameters(refinement: Refinement = DEFAULT_REFINEMENT) -> cv2.aruc
     """OpenCV detector parameters with our corner refinement."""
     params = cv2.aruco.DetectorParameters()
     refinement = Refinement(refinement)
-    params.cornerRefinementMethod = _CV_REFINE[EDGES_START if refinement == Refinement.EDGES else refinement]
+    params.cornerRefinementMethod = _CV_REFINE[EDGES_START if refinement.fits_edges else refinement]
     params.cornerRefinementWinSize = SUBPIX_WIN
     params.cornerRefinementMaxIterations = SUBPIX_MAX_ITER
     params.cornerRefinementMinAccuracy = SUBPIX_MIN_ACCURACY
@@ -141,14 +147,15 @@ class MarkerDetector:
         On the rain-filtered image where the marker's cells are wide enough to survive it.
         """
         cells = self.dictionary.markerSize + 2
+        blur_model = self.refinement == Refinement.BLURRED
         if opened is None:
-            return refine_corners_batch(gray, quads, self.camera, cells)
+            return refine_corners_batch(gray, quads, self.camera, cells, blur_model)
         side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
         big = side / cells >= RAIN_REFINE_MIN_CELL_PX
         out, ok = quads.copy(), np.zeros(len(quads), dtype=bool)
         for mask, image in ((big, opened), (~big, gray)):
             if mask.any():
-                out[mask], ok[mask] = refine_corners_batch(image, quads[mask], self.camera, cells)
+                out[mask], ok[mask] = refine_corners_batch(image, quads[mask], self.camera, cells, blur_model)
         return out, ok
 
     def detect(self, gray: np.ndarray, keep_rejected: bool = False) -> Detections:
@@ -157,6 +164,6 @@ class MarkerDetector:
             gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
         opened = self.opening(gray)
         quads, ids, rejected = self.find(gray, opened)
-        if len(ids) and self.refinement == Refinement.EDGES:  # all markers of the frame in vectorised calls
+        if len(ids) and self.refinement.fits_edges:  # all markers of the frame in vectorised calls
             quads = self.refine(gray, opened, quads)[0]
         return detections(quads, ids, rejected if keep_rejected else [])

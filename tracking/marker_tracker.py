@@ -24,7 +24,6 @@ from tracking.detection import (
     RAIN_REFINE_MIN_CELL_PX,
     Detections,
     MarkerDetector,
-    Refinement,
     detections,
     detector_parameters,
     find_quads,
@@ -195,7 +194,7 @@ class MarkerTracker:
         self.last_full = -(10 ** 9)  # frame number of the last whole-frame search
         self.full_searches = 0  # whole-frame searches so far (for benchmarks and tests)
         self._force_full = False
-        self._edges = detector.refinement == Refinement.EDGES  # corners are re-fitted: coarse searches are fine
+        self._edges = detector.refinement.fits_edges  # corners are re-fitted: coarse searches are fine
         self._params = detector_parameters(detector.refinement)
         self._roi_detector = cv2.aruco.ArucoDetector(detector.dictionary, self._params)
         self._full: dict[tuple[int, int, bool], cv2.aruco.ArucoDetector] = {}

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.synthetic import PAPER_K, PAPER_SIZE, PlacedMarker, render, true_corners
+from tests.synthetic import PAPER_K, PAPER_SIZE, WHITE, PlacedMarker, render, true_corners
 from tracking.camera import CameraModel
 from tracking.corners import refine_corners, refine_corners_batch, try_refine_corners
 from tracking.detection import MarkerDetector, Refinement
@@ -20,6 +20,10 @@ MAX_RMS_PX = 0.08
 SUBPIX_MIN_INWARD_PX = 0.1
 NOISY_MAX_BIAS_PX = 0.05
 NOISY_MAX_RMS_PX = 0.15
+BLURRED_CELL_PX = 3.0  # the marker's cells in the image ...
+BLURRED_SIGMA_PX = 1.0  # ... under this lens blur (benchmarks/results/corner_scale.md)
+EDGES_BLURRED_MIN_SCALE = 3e-3  # measured +5.6 ‰ (seeds 0-2)
+BLURRED_MAX_SCALE = 0.6e-3  # measured +0.18 ‰
 GOLD_TOLERANCE_PX = 2.0  # gold corners are OpenCV's integer contour corners, ~0.5 px inward of the edges
 BARREL = np.array([-0.1, 0.05, 0.0, 0.0, 0.0])
 SLOTS = [(200, 170), (700, 170), (200, 430), (700, 430)]
@@ -82,6 +86,36 @@ def test_edges_unbiased_on_noisy_blurred_render() -> None:
     bias, rms = _errors({m.id: m.corners for m in edges.markers}, truth)
     assert abs(bias) < NOISY_MAX_BIAS_PX
     assert rms < NOISY_MAX_RMS_PX
+
+
+def _small_blurred_markers(seed: int) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """Four 1 m markers with 3 px cells (42 m), white all round, under a 1 px lens blur, and their true corners."""
+    rng = np.random.default_rng(seed)
+    placed = [PlacedMarker(i + 1, _pose(PAPER_K[0, 0] / 8 / BLURRED_CELL_PX, 0.0, u + rng.uniform(-20, 20),
+                                        v + rng.uniform(-20, 20), rng.uniform(5, 40)), 1.0)
+              for i, (u, v) in enumerate(SLOTS)]
+    gray = render(PAPER_K, np.zeros(5), PAPER_SIZE, placed, blur=BLURRED_SIGMA_PX, background=WHITE)
+    return gray, {m.id: true_corners(PAPER_K, np.zeros(5), m) for m in placed}
+
+
+def _scale(corners: np.ndarray, truth: np.ndarray) -> float:
+    """Least-squares scale error of corners (4, 2) about the true centre: + = the marker reads large."""
+    radial = truth - truth.mean(axis=0)
+    return float(np.sum((corners - truth) * radial) / np.sum(radial * radial))
+
+
+def test_blurred_refinement_reads_small_blurred_markers_at_their_size() -> None:
+    """On small cells under a lens blur, the area edge reads white-surrounded markers large; the blurred-profile
+    model (`--refine blurred`) does not."""
+    scales: dict[Refinement, list[float]] = {Refinement.EDGES: [], Refinement.BLURRED: []}
+    for seed in range(3):
+        gray, truth = _small_blurred_markers(seed)
+        for refinement, found in scales.items():
+            markers = MarkerDetector("DICT_6X6_250", refinement).detect(gray).markers
+            assert sorted(m.id for m in markers) == sorted(truth)
+            found += [_scale(m.corners, truth[m.id]) for m in markers]
+    assert np.mean(scales[Refinement.EDGES]) > EDGES_BLURRED_MIN_SCALE
+    assert abs(np.mean(scales[Refinement.BLURRED])) < BLURRED_MAX_SCALE
 
 
 def test_fails_gracefully() -> None:
