@@ -15,8 +15,8 @@ The area edge reads its black and white levels half a cell inside and outside th
 over more than about a sixth of a cell, the neighbouring edges (code cells, the plate's edge) reach those levels
 and bias the edge (benchmarks/corner_scale.py: up to +7 per mille of scale at 2.8 px cells and 1 px blur). With
 blur_model (`--refine blurred`) the fine pass instead fits each profile with a blurred model of the marker's
-cross-section (inner cell, border, quiet cell, beyond), on markers whose cells are 2 to 8 px across; it is
-exact on blurred renders, but not better on the simulator's sharp pictures (see the README).
+cross-section (inner cell, border, quiet cell, beyond), on markers whose cells are 2 to 8 px across: within
+0.5 per mille on blurred renders, but no better on the simulator's sharp pictures (see the README).
 
 It needs the marker's white quiet zone (one cell at least); where an edge cannot be fitted
 (occlusion, no contrast, a corner moving too far) the marker keeps its input corners. Accuracy drops
