@@ -5,10 +5,12 @@ with fog 50 % and rain 30 %, at 920×600 and 15 FPS, then tracked once; the same
 estimated in the paper's mode, the live rigid-body filter (default) and the offline smoother, and
 compared with the simulation log at the monitored cones. Results: benchmarks/results/accuracy.md.
 
-Run: .venv/bin/python benchmarks/accuracy.py [--fps 15] [--crf 16] [--jobs 2] [--only config2-procedure5]
+Run: .venv/bin/python benchmarks/accuracy.py [--fps 15] [--crf 16] [--lens-blur 0.7] [--refine blurred] [--jobs 2]
+                                             [--only config2-procedure5]
 Renders are cached in benchmarks/.cache/ (delete it to re-render). --crf encodes the videos at another H.264 CRF
-than the scenarios' own (benchmarks/imaging.py: the video's quality limits the largest errors); its results go to
-accuracy-crfN.md.
+than the scenarios' own (benchmarks/imaging.py: the video's quality limits the largest errors); --lens-blur renders
+with an optical blur (weather.lens_blur, Gaussian σ in pixels); --refine detects with another corner refinement.
+Their results go to accuracy-crfN-lens_blurS-REFINE.md (the parts given).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetection
+from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetection, Refinement
 from tracking.evaluate import Evaluation, errors, evaluate_runs, truth_at
 from tracking.filtering import ConeEstimate
 from tracking.fusion import ESTIMATORS
@@ -89,14 +91,15 @@ def bit_rate(rig: Rig, duration: float) -> list[float]:
     return [rig.resolve(c.source).stat().st_size * 8 / 1e6 / duration for c in rig.cameras]
 
 
-def detect(name: str, scene: Path) -> list[tuple[str, float, dict[int, np.ndarray]]]:
+def detect(name: str, scene: Path, refinement: Refinement = DEFAULT_REFINEMENT
+           ) -> list[tuple[str, float, dict[int, np.ndarray]]]:
     """A rendered scene's detections (camera, capture time, id -> corners): tracked once, cached with the scene
     (detection is the cost; poses and everything after are recomputed)."""
-    cache = scene / "detections.pkl"
+    cache = scene / ("detections.pkl" if refinement == DEFAULT_REFINEMENT else f"detections-{refinement.value}.pkl")
     if not cache.is_file():
         rig = with_mounts(load_rig(scene / "rig.yaml"), name)
         cache.write_bytes(pickle.dumps([(r.camera, r.time, {d.id: d.corners for d in r.detections.markers})
-                                        for r in track_rig(rig)]))
+                                        for r in track_rig(rig, refinement)]))
     return pickle.loads(cache.read_bytes())
 
 
@@ -130,13 +133,13 @@ def measure(rig: Rig, detections: list[tuple[str, float, dict[int, np.ndarray]]]
     return out
 
 
-def run(name: str, fps: float, weather: dict | None = None) -> dict:
+def run(name: str, fps: float, weather: dict | None = None, refinement: Refinement = DEFAULT_REFINEMENT) -> dict:
     """Render, track once, estimate in every mode; timings included."""
     t0 = time.perf_counter()
     scene = render(name, fps, weather)
     t1 = time.perf_counter()
     rig = with_mounts(load_rig(scene / "rig.yaml"), name)
-    detections = detect(name, scene)
+    detections = detect(name, scene, refinement)
     t2 = time.perf_counter()
     measurements = measure(rig, detections)
     cost_file = scene / "cost.json"  # measured when the scene was rendered and tracked, kept with the cache
@@ -198,14 +201,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fps", type=float, default=15.0)
     parser.add_argument("--crf", type=int, default=None, help="H.264 CRF of the renders (default: the scenarios' own)")
+    parser.add_argument("--lens-blur", type=float, default=None, help="optical blur σ of the renders, px (default 0)")
+    parser.add_argument("--refine", type=Refinement, default=DEFAULT_REFINEMENT, help="corner refinement")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--only", nargs="*", default=None)
     args = parser.parse_args()
     names = [n for n in RUNS if args.only is None or n in args.only]
     CACHE.mkdir(parents=True, exist_ok=True)
+    weather = {**({"crf": args.crf} if args.crf is not None else {}),
+               **({"lens_blur": args.lens_blur} if args.lens_blur is not None else {})} or None
+    varied = weather is not None or args.refine != DEFAULT_REFINEMENT
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        weather = None if args.crf is None else {"crf": args.crf}
-        results = list(pool.map(run, names, [args.fps] * len(names), [weather] * len(names)))
+        results = list(pool.map(run, names, [args.fps] * len(names), [weather] * len(names),
+                                [args.refine] * len(names)))
     by_name = {r["name"]: r for r in results}
     sections = []
     for group in dict.fromkeys(RUNS[n] for n in names):
@@ -239,7 +247,8 @@ def main() -> None:
         f"Procedures rendered with fog 50 % and rain 30 % (all of them, not only 3 and 4 as in the paper), "
         f"920×600, {args.fps:g} FPS per camera, H.264 at CRF {crf} (veryfast; {min(mbps):.1f}–{max(mbps):.1f} Mbit/s "
         "per camera), "
-        "cameras unsynchronised; corners by edge fit; errors at the "
+        + (f"an optical blur of σ {args.lens_blur:g} px, " if args.lens_blur else "")
+        + f"cameras unsynchronised; corners by `--refine {args.refine.value}`; errors at the "
         "monitored cones. Modes: **paper** = the paper's method (camera 1 gives Δx, Δz, camera 2 Δy, Δz, "
         "10-sample running averages); **fused** = the live Kalman filter of the topside and every camera, "
         "measured by the markers' corners (default); "
@@ -263,11 +272,14 @@ def main() -> None:
         *unseen,
         "",
         *(["### Cost (one core per run)", "", "| procedure | render [s] | track [s] | simulated [s] |",
-           "| --- | ---: | ---: | ---: |", *timing, ""] if args.crf is None else []),  # --crf runs may reuse renders
+           "| --- | ---: | ---: | ---: |", *timing, ""] if not varied else []),  # varied runs may reuse renders
     ])
     print(text)
     if args.only is None:
-        (RESULTS if args.crf is None else RESULTS.with_name(f"accuracy-crf{args.crf}.md")).write_text(text)
+        parts = ([f"crf{args.crf}"] if args.crf is not None else []) + (
+            [f"lens_blur{args.lens_blur:g}"] if args.lens_blur is not None else []) + (
+            [args.refine.value] if args.refine != DEFAULT_REFINEMENT else [])
+        RESULTS.with_name("-".join(["accuracy", *parts]) + ".md").write_text(text)
 
 
 if __name__ == "__main__":
