@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.corners import marker_pose
-from tests.synthetic import BACKGROUND, PAPER_K, PAPER_SIZE, WHITE, PlacedMarker, render, true_corners
+from tests.synthetic import BACKGROUND, PAPER_K, PAPER_SIZE, WHITE, PlacedMarker, render, scale_error, true_corners
 from tracking.camera import CameraModel
 from tracking.corners import refine_corners
 
@@ -36,12 +36,6 @@ START_NOISE_PX = 0.3
 ROLL_RANGE_DEG = (5.0, 40.0)
 CELLS = 8  # cells across the black square (6x6 bits + border)
 SEED = 20261122
-
-
-def scale_error(corners: np.ndarray, truth: np.ndarray) -> float:
-    """Least-squares scale factor - 1 of corners (4, 2) about the true centre, from truth (4, 2)."""
-    radial = truth - truth.mean(axis=0)
-    return float(np.sum((corners - truth) * radial) / np.sum(radial * radial))
 
 
 def run() -> pd.DataFrame:

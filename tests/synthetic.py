@@ -46,6 +46,12 @@ def true_corners(K: np.ndarray, dist: np.ndarray, m: PlacedMarker) -> np.ndarray
     return px.reshape(4, 2)
 
 
+def scale_error(corners: np.ndarray, truth: np.ndarray) -> float:
+    """Least-squares scale error of corners (4, 2) about the true centre, from truth (4, 2): + = reads large."""
+    radial = truth - truth.mean(axis=0)
+    return float(np.sum((corners - truth) * radial) / np.sum(radial * radial))
+
+
 def render(K: np.ndarray, dist: np.ndarray, size: tuple[int, int], markers: list[PlacedMarker],
            dictionary: int = cv2.aruco.DICT_6X6_250, noise: float = 0.0, blur: float = 0.0,
            seed: int = 0, ss: int = SUPERSAMPLE, background: float = BACKGROUND) -> np.ndarray:

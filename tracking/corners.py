@@ -151,10 +151,12 @@ def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, 
     else:
         half = np.clip(HALF_WINDOW * cell_across, HALF_WINDOW_MIN_PX, HALF_WINDOW_MAX_PX)
         level = np.minimum(LEVEL_AT * cell_across, LEVEL_MAX_PX)
-    model_reach = np.clip(BLUR_MODEL_CELLS * cell_across, HALF_WINDOW_MIN_PX, BLUR_MODEL_MAX_PX)
-    modelled = (blur_model and not coarse) & (cell_across < BLUR_MODEL_MAX_CELL_PX) \
-        & (cell_across.min(axis=1, keepdims=True) >= BLUR_MODEL_MIN_CELL_PX)  # (B, 4)
-    reach = np.where(modelled, np.maximum(level, model_reach), level)
+    reach, modelled = level, None
+    if blur_model and not coarse:  # the edges the blurred-profile model takes, and its profiles' reach
+        model_reach = np.clip(BLUR_MODEL_CELLS * cell_across, HALF_WINDOW_MIN_PX, BLUR_MODEL_MAX_PX)
+        modelled = (cell_across < BLUR_MODEL_MAX_CELL_PX) \
+            & (cell_across.min(axis=1, keepdims=True) >= BLUR_MODEL_MIN_CELL_PX)  # (B, 4)
+        reach = np.where(modelled, np.maximum(level, model_reach), level)
     # keep the profiles clear of the neighbouring edges: wider margins at acute corners
     wedge = reach * (1 + cos_c) / sin_c
     floor = np.maximum(END_MARGIN * length / cells, END_MARGIN_MIN_PX)
@@ -183,7 +185,7 @@ def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, 
     else:
         e, found = _area_edge(values, half, step)
         found &= np.abs(e) < half[..., None]
-        rows = np.flatnonzero(modelled.any(axis=1))
+        rows = np.flatnonzero(modelled.any(axis=1)) if modelled is not None else []
         if len(rows):  # the blurred-profile model on these markers' modelled edges
             n_off = int(np.ceil(np.max(model_reach[rows]) / PROFILE_STEP_PX))
             across = model_reach[rows, :, None] * (np.arange(-n_off, n_off + 1) / n_off)

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.synthetic import PAPER_K, PAPER_SIZE, WHITE, PlacedMarker, render, true_corners
+from tests.synthetic import PAPER_K, PAPER_SIZE, WHITE, PlacedMarker, render, scale_error, true_corners
 from tracking.camera import CameraModel
 from tracking.corners import refine_corners, refine_corners_batch, try_refine_corners
 from tracking.detection import MarkerDetector, Refinement
@@ -98,12 +98,6 @@ def _small_blurred_markers(seed: int) -> tuple[np.ndarray, dict[int, np.ndarray]
     return gray, {m.id: true_corners(PAPER_K, np.zeros(5), m) for m in placed}
 
 
-def _scale(corners: np.ndarray, truth: np.ndarray) -> float:
-    """Least-squares scale error of corners (4, 2) about the true centre: + = the marker reads large."""
-    radial = truth - truth.mean(axis=0)
-    return float(np.sum((corners - truth) * radial) / np.sum(radial * radial))
-
-
 def test_blurred_refinement_reads_small_blurred_markers_at_their_size() -> None:
     """On small cells under a lens blur, the area edge reads white-surrounded markers large; the blurred-profile
     model (`--refine blurred`) does not."""
@@ -113,7 +107,7 @@ def test_blurred_refinement_reads_small_blurred_markers_at_their_size() -> None:
         for refinement, found in scales.items():
             markers = MarkerDetector("DICT_6X6_250", refinement).detect(gray).markers
             assert sorted(m.id for m in markers) == sorted(truth)
-            found += [_scale(m.corners, truth[m.id]) for m in markers]
+            found += [scale_error(m.corners, truth[m.id]) for m in markers]
     assert np.mean(scales[Refinement.EDGES]) > EDGES_BLURRED_MIN_SCALE
     assert abs(np.mean(scales[Refinement.BLURRED])) < BLURRED_MAX_SCALE
 
