@@ -1,0 +1,158 @@
+"""Fine passes of the edge fit: one (the default) against two, on sharp and on lens-blurred simulator pictures.
+
+The edge fit runs a coarse pass, then ITERATIONS - 1 fine passes (tracking/corners.py). The coarse pass can land
+half a pixel off on small cells, and one fine pass from there reads its black or white level on the edge's own
+ramp; a second fine pass removes that, but then the area edge's own bias under blur (its levels read half a cell
+from the edge, where the neighbouring edges' blur reaches: benchmarks/corner_scale.py) is all that is left.
+
+Procedures 1 and 2 (configuration 1, fog and rain, CRF 22, 15 FPS) from the accuracy benchmark's cache, rendered
+sharp (the scenarios' default) and with weather.lens_blur 0.7 px, are detected with one and with two fine passes.
+Per variant: the mean outward offset of every (camera, marker, edge) over the run against truth_frames.csv (its
+RMS over those edges and the largest), the mean scale error of every (camera, marker) (RMS over them; the stern
+cameras' depth, hence y, follows it: 1 per mille is 30 mm at 30 m), the median of the markers' RMS corner errors,
+and the live filter's e_MAE and |e|max per axis at the monitored cones (fusion.TopsideFilter on the detections).
+
+    .venv/bin/python -m benchmarks.fine_passes    # ~15 min on 2 cores, writes benchmarks/results/fine_passes.md
+"""
+
+from __future__ import annotations
+
+import pickle
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+import tracking.corners
+from benchmarks.accuracy import detect, measure, render, with_mounts
+from benchmarks.fusion_diagnosis import errors
+from tests.synthetic import scale_error
+from tracking import fusion
+from tracking.pipeline import track_rig
+from tracking.rig import load_rig
+
+RESULTS = Path(__file__).resolve().parent / "results" / "fine_passes.md"
+RUNS = ("config1-procedure1", "config1-procedure2")
+PICTURES = {"sharp": None, "lens blur σ 0.7 px": {"lens_blur": 0.7}}  # name: weather changed
+FINE_PASSES = (1, 2)
+FPS = 15.0
+MIN_UNOCCLUDED = 0.99  # markers the simulator drew whole
+MAX_CORNER_ERROR_PX = 1.0  # a corner further off is a failed fit, not a bias: left out of the edge statistics
+MIN_FRAMES = 50  # (camera, marker) pairs seen in fewer frames are left out of the edge statistics
+
+
+def detections(name: str, scene: Path, passes: int) -> list[tuple[str, float, dict[int, np.ndarray]]]:
+    """The scene's detections with that many fine passes, cached beside the accuracy benchmark's."""
+    default = tracking.corners.ITERATIONS - 1
+    if passes == default:
+        return detect(name, scene)
+    cache = scene / f"detections-fine{passes}.pkl"
+    if not cache.is_file():
+        tracking.corners.ITERATIONS = passes + 1  # this worker process only
+        try:
+            rig = with_mounts(load_rig(scene / "rig.yaml"), name)
+            cache.write_bytes(pickle.dumps([(r.camera, r.time, {d.id: d.corners for d in r.detections.markers})
+                                            for r in track_rig(rig)]))
+        finally:
+            tracking.corners.ITERATIONS = default + 1
+    return pickle.loads(cache.read_bytes())
+
+
+def true_corners(scene: Path) -> dict[tuple[str, float, int], np.ndarray]:
+    """(camera, capture time, id) -> true corners (4, 2) of the markers the simulator drew whole."""
+    tf = pd.read_csv(scene / "truth_frames.csv")
+    tf = tf[tf.unoccluded > MIN_UNOCCLUDED]
+    xy = tf[[f"c{k}{a}" for k in range(4) for a in "xy"]].to_numpy().reshape(-1, 4, 2)
+    return {(c, round(t, 6), int(i)): q for c, t, i, q in zip(tf.camera, tf.capture_time, tf.marker_id, xy,
+                                                               strict=True)}
+
+
+def edge_offsets(corners: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Outward offsets (4,) of the edges k -> k+1 of corners (4, 2) from the true edges of truth (4, 2), px."""
+    centre = truth.mean(axis=0)
+    out = np.empty(4)
+    for k in range(4):
+        a, b = truth[k], truth[(k + 1) % 4]
+        d = (b - a) / np.linalg.norm(b - a)
+        n = np.array([d[1], -d[0]])
+        n *= np.sign(n @ ((a + b) / 2 - centre))
+        out[k] = ((corners[k] - a + corners[(k + 1) % 4] - b) / 2) @ n
+    return out
+
+
+def corner_stats(found: list, truth: dict[tuple[str, float, int], np.ndarray]) -> dict[str, float]:
+    """RMS and largest of the per-(camera, marker, edge) mean edge offsets and the median RMS corner error (px), and
+    the RMS of the per-(camera, marker) mean scale errors (per mille)."""
+    offsets: dict[tuple[str, int], list[np.ndarray]] = {}
+    scales: dict[tuple[str, int], list[float]] = {}
+    rms = []
+    for camera, t, markers in found:
+        for marker_id, c in markers.items():
+            q = truth.get((camera, round(t, 6), marker_id))
+            if q is None:
+                continue
+            c = np.asarray(c, dtype=float).reshape(4, 2)
+            if np.abs(c - q).max() > MAX_CORNER_ERROR_PX:
+                continue
+            rms.append(np.sqrt(np.mean((c - q) ** 2)))
+            offsets.setdefault((camera, marker_id), []).append(edge_offsets(c, q))
+            scales.setdefault((camera, marker_id), []).append(scale_error(c, q))
+    means = np.array([np.mean(v, axis=0) for v in offsets.values() if len(v) >= MIN_FRAMES])
+    scale = np.array([np.mean(v) for v in scales.values() if len(v) >= MIN_FRAMES])
+    return {"edge_rms": float(np.sqrt(np.mean(means**2))), "edge_max": float(np.abs(means).max()),
+            "scale_rms": float(np.sqrt(np.mean(scale**2))) * 1e3, "corner_median": float(np.median(rms))}
+
+
+def run(name: str, pictures: str, passes: int) -> dict:
+    """One variant of one procedure: corner statistics and the live filter's errors."""
+    scene = render(name, FPS, PICTURES[pictures])
+    found = detections(name, scene, passes)
+    rig = with_mounts(load_rig(scene / "rig.yaml"), name)
+    truth = pd.read_csv(scene / "truth.csv")
+    monitored = sorted({p.cone for p in rig.all_pairs()})
+    err = errors(fusion.TopsideFilter(rig), measure(rig, found), truth, monitored)
+    e = err[["ex", "ey", "ez"]].abs().to_numpy() * 1e3
+    return {"name": name, "pictures": pictures, "passes": passes, **corner_stats(found, true_corners(scene)),
+            "mae": e.mean(axis=0), "max": e.max(axis=0)}
+
+
+def table(results: list[dict]) -> str:
+    """The markdown table, one row per (pictures, passes)."""
+    lines = ["| pictures | fine passes | edge offsets: RMS, largest [px] | marker scale errors: RMS [‰] | "
+             "median corner error [px] | "
+             + " | ".join(f"{n.split('-')[1]}: e_MAE x / y / z [mm] | {n.split('-')[1]}: abs(e)max x / y / z [mm]"
+                          for n in RUNS) + " |",
+             "| --- | ---: | ---: | ---: | ---: |" + " ---: | ---: |" * len(RUNS)]
+    for pictures in PICTURES:
+        for passes in FINE_PASSES:
+            rows = [r for r in results if r["pictures"] == pictures and r["passes"] == passes]
+            by_run = {r["name"]: r for r in rows}
+            edges = " / ".join(f"{r['edge_rms']:.3f}, {r['edge_max']:.3f}" for r in rows)
+            scale = " / ".join(f"{r['scale_rms']:.2f}" for r in rows)
+            corner = " / ".join(f"{r['corner_median']:.3f}" for r in rows)
+            cells = " | ".join(" / ".join(f"{v:.1f}" for v in by_run[n]["mae"]) + " | "
+                               + " / ".join(f"{v:.0f}" for v in by_run[n]["max"]) for n in RUNS)
+            default = " (default)" if passes == tracking.corners.ITERATIONS - 1 else ""
+            lines.append(f"| {pictures} | {passes}{default} | {edges} | {scale} | {corner} | {cells} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    """Run every variant, print and write the table."""
+    start = time.perf_counter()
+    jobs = [(n, p, k) for p in PICTURES for k in FINE_PASSES for n in RUNS]
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        results = list(pool.map(run, *zip(*jobs, strict=True)))
+    text = table(results)
+    print(text)
+    RESULTS.write_text(
+        "# Fine passes of the edge fit\n\n"
+        + __doc__.split("\n\n")[1].replace("\n", " ") + "\n\n" + __doc__.split("\n\n")[2].replace("\n", " ")
+        + f"\n\nCorner statistics per procedure (1 / 2). Run time {time.perf_counter() - start:.0f} s.\n\n"
+        + text + "\n")
+
+
+if __name__ == "__main__":
+    main()
