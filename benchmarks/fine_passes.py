@@ -27,7 +27,7 @@ import pandas as pd
 
 import tracking.corners
 from benchmarks.accuracy import detect, measure, render, with_mounts
-from benchmarks.fusion_diagnosis import errors
+from benchmarks.fusion_diagnosis import errors, true_corners
 from tests.synthetic import scale_error
 from tracking import fusion
 from tracking.pipeline import track_rig
@@ -60,15 +60,6 @@ def detections(name: str, scene: Path, passes: int) -> list[tuple[str, float, di
     return pickle.loads(cache.read_bytes())
 
 
-def true_corners(scene: Path) -> dict[tuple[str, float, int], np.ndarray]:
-    """(camera, capture time, id) -> true corners (4, 2) of the markers the simulator drew whole."""
-    tf = pd.read_csv(scene / "truth_frames.csv")
-    tf = tf[tf.unoccluded > MIN_UNOCCLUDED]
-    xy = tf[[f"c{k}{a}" for k in range(4) for a in "xy"]].to_numpy().reshape(-1, 4, 2)
-    return {(c, round(t, 6), int(i)): q for c, t, i, q in zip(tf.camera, tf.capture_time, tf.marker_id, xy,
-                                                               strict=True)}
-
-
 def edge_offsets(corners: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """Outward offsets (4,) of the edges k -> k+1 of corners (4, 2) from the true edges of truth (4, 2), px."""
     centre = truth.mean(axis=0)
@@ -90,7 +81,7 @@ def corner_stats(found: list, truth: dict[tuple[str, float, int], np.ndarray]) -
     rms = []
     for camera, t, markers in found:
         for marker_id, c in markers.items():
-            q = truth.get((camera, round(t, 6), marker_id))
+            q = truth.get((camera, round(t, 3), marker_id))
             if q is None:
                 continue
             c = np.asarray(c, dtype=float).reshape(4, 2)
@@ -114,8 +105,8 @@ def run(name: str, pictures: str, passes: int) -> dict:
     monitored = sorted({p.cone for p in rig.all_pairs()})
     err = errors(fusion.TopsideFilter(rig), measure(rig, found), truth, monitored)
     e = err[["ex", "ey", "ez"]].abs().to_numpy() * 1e3
-    return {"name": name, "pictures": pictures, "passes": passes, **corner_stats(found, true_corners(scene)),
-            "mae": e.mean(axis=0), "max": e.max(axis=0)}
+    stats = corner_stats(found, true_corners(scene, MIN_UNOCCLUDED))
+    return {"name": name, "pictures": pictures, "passes": passes, **stats, "mae": e.mean(axis=0), "max": e.max(axis=0)}
 
 
 def table(results: list[dict]) -> str:

@@ -63,9 +63,11 @@ class TrueCameras(fusion.TopsideFilter):
         return F
 
 
-def true_corners(scene: Path) -> dict[tuple[str, float, int], np.ndarray]:
-    """(camera, capture time rounded to ms, marker) -> the simulator's (4, 2) corners, distorted pixels."""
+def true_corners(scene: Path, min_unoccluded: float = 0.0) -> dict[tuple[str, float, int], np.ndarray]:
+    """(camera, capture time rounded to ms, marker) -> the simulator's (4, 2) corners, distorted pixels, of the
+    markers with more than min_unoccluded of their area in sight."""
     tf = pd.read_csv(scene / "truth_frames.csv").dropna(subset=["marker_id"])
+    tf = tf[tf["unoccluded"] > min_unoccluded] if min_unoccluded > 0 else tf
     corners = tf[[f"c{i}{a}" for i in range(4) for a in "xy"]].to_numpy().reshape(-1, 4, 2)
     keys = zip(tf["camera"], tf["capture_time"].round(3), tf["marker_id"].astype(int), strict=True)
     return dict(zip(keys, corners, strict=True))
