@@ -100,6 +100,10 @@ GAUSSIAN_MEDIAN_CHI2_1 = 0.4549  # median of a χ² variable with 1 degree of fr
 PLACEMENT_GAIN = 25.0  # σ × 5 on the pose that first places a camera: it only linearises; the same frame's corners,
 # applied right after, carry its information (else counted twice, and a lone marker's tilt, poorly fitted, sticks)
 CORNER_GATE_CHI2 = 26.12  # 8 degrees of freedom (a marker's four corners), 99.9 %
+PLACEMENT_MISFIT_RATIO = 3.0  # an ambiguous lone jacket marker is settled by the topside's corners only when one
+# IPPE option fits them this many times better (squared pixels) than the other; a near tie waits for another view. With
+# the pair stacked in one plane, a yaw flip barely moves the topside's marker: one such tie (8.7 against 9.4 px²) had
+# placed a stern camera 20° and 16 m off, and nothing afterwards corrected it within a minute
 TOPSIDE_PLACEMENT_M = 1.0  # σ of the topside's position when a single view first places it
 PLACEMENT_FIT_P = 0.99  # a view places a camera or the topside only if its pose fits its corners as well as
 # CORNER_NOISE_PX would at this probability (χ² of the RMS over 8 N - 6 degrees of freedom, N markers): nothing
@@ -668,8 +672,11 @@ class TopsideFilter:
                     zero[cam.index:cam.index + 6] = 0.0
                     return sum(float(np.sum((self._predict_corners(cam, i, zero, o.K) - o.corners[i].reshape(-1))
                                             ** 2)) for i in seen)
-                k = int(np.argmin([misfit(T) for T, _ in options]))
+                misfits = [misfit(T) for T, _ in options]
                 cam.T_jacket_camera = None
+                k = int(np.argmin(misfits))
+                if any(f < PLACEMENT_MISFIT_RATIO * misfits[k] for j, f in enumerate(misfits) if j != k):
+                    return False  # the topside's corners cannot tell the options apart: wait
             elif o.topside is not None:  # until then: the only option under which the topside hangs near level
                 tilts = [min(float(np.linalg.norm(rotvec(T[:3, :3].T @ T_ct[:3, :3]))) for T_ct in
                              [o.topside.T_camera_body, *(a for a, _ in o.topside.alternatives)]) for T, _ in options]

@@ -458,3 +458,38 @@ def test_a_view_with_a_corner_off_does_not_place_a_camera() -> None:
         kf.predict(o.time, [o])
         kf.update(o)
     assert kf.cameras["far"].T_jacket_camera is not None
+
+
+def test_a_near_tie_between_ippe_options_does_not_place_a_camera() -> None:
+    """An ambiguous lone jacket view is settled by the topside's corners only when one IPPE option fits them clearly
+    better: offered two options that fit equally, the camera waits; offered the true pose and one turned 20° about
+    the marker's vertical, it takes the true one."""
+    import dataclasses
+
+    the_rig = camera_rig("vessel")
+    obs = observations(the_rig, 3.0)
+    kf = TopsideFilter(the_rig)
+    for o in obs:
+        if o.camera != "far" and o.time < 2.0:
+            kf.predict(o.time, [o])
+            kf.update(o)
+    assert kf.topside_placed and kf.P is not None and np.sqrt(np.diag(kf.P)[:3]).max() < 0.05
+    far = next(o for o in obs if o.camera == "far" and o.time > 2.0 and o.jacket is not None and
+               len(o.jacket.marker_ids) == 1 and any(i in kf.topside_corners for i in o.corners))
+    T, cov = far.jacket.T_camera_body, far.jacket.covariance
+    marker = next(m for m in the_rig.markers if m.id == far.jacket.marker_ids[0])
+    turn = np.eye(4)
+    turn[:3, :3] = rotation(np.array([0.0, 0.0, np.radians(20.0)]))
+    T_turned = T @ marker.T_body_marker @ turn @ np.linalg.inv(marker.T_body_marker)  # about the marker, jacket z
+
+    def offered(alternative: np.ndarray) -> BodyObservation:
+        jacket = dataclasses.replace(far.jacket, choice=Choice.AMBIGUOUS, alternatives=((alternative, cov),))
+        return dataclasses.replace(far, jacket=jacket)
+
+    kf.predict(far.time, [far])
+    kf.update(offered(T.copy()))
+    assert kf.cameras["far"].T_jacket_camera is None
+    kf.update(offered(T_turned))
+    placed = kf.cameras["far"].T_jacket_camera
+    assert placed is not None
+    assert np.abs(placed - np.linalg.inv(T)).max() < 1e-6
