@@ -91,11 +91,13 @@ def bit_rate(rig: Rig, duration: float) -> list[float]:
     return [rig.resolve(c.source).stat().st_size * 8 / 1e6 / duration for c in rig.cameras]
 
 
-def detect(name: str, scene: Path, refinement: Refinement = DEFAULT_REFINEMENT
+def detect(name: str, scene: Path, refinement: Refinement = DEFAULT_REFINEMENT, cache: Path | None = None
            ) -> list[tuple[str, float, dict[int, np.ndarray]]]:
     """A rendered scene's detections (camera, capture time, id -> corners): tracked once, cached with the scene
-    (detection is the cost; poses and everything after are recomputed)."""
-    cache = scene / ("detections.pkl" if refinement == DEFAULT_REFINEMENT else f"detections-{refinement.value}.pkl")
+    (detection is the cost; poses and everything after are recomputed); cache: another file for a variant."""
+    if cache is None:
+        cache = scene / ("detections.pkl" if refinement == DEFAULT_REFINEMENT else
+                         f"detections-{refinement.value}.pkl")
     if not cache.is_file():
         rig = with_mounts(load_rig(scene / "rig.yaml"), name)
         cache.write_bytes(pickle.dumps([(r.camera, r.time, {d.id: d.corners for d in r.detections.markers})
