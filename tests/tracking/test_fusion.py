@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -464,8 +466,6 @@ def test_a_near_tie_between_ippe_options_does_not_place_a_camera() -> None:
     """An ambiguous lone jacket view is settled by the topside's corners only when one IPPE option fits them clearly
     better: offered two options that fit equally, the camera waits; offered the true pose and one turned 20° about
     the marker's vertical, it takes the true one."""
-    import dataclasses
-
     the_rig = camera_rig("vessel")
     obs = observations(the_rig, 3.0)
     kf = TopsideFilter(the_rig)
