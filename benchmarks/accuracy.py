@@ -7,15 +7,18 @@ compared with the simulation log at the monitored cones. Results: benchmarks/res
 
 Run: .venv/bin/python benchmarks/accuracy.py [--fps 15] [--crf 16] [--lens-blur 0.7] [--refine blurred] [--jobs 2]
                                              [--only config2-procedure5]
-Renders are cached in benchmarks/.cache/ (delete it to re-render). --crf encodes the videos at another H.264 CRF
-than the scenarios' own (benchmarks/imaging.py: the video's quality limits the largest errors); --lens-blur renders
-with an optical blur (weather.lens_blur, Gaussian σ in pixels); --refine detects with another corner refinement.
+Renders are cached in benchmarks/.cache/ (delete it to re-render); detections beside them, named by a hash of the
+detection code (detection_code), so a change to the corner fit is always measured afresh. --crf encodes the
+videos at another H.264 CRF than the scenarios' own (benchmarks/imaging.py: the video's quality limits the largest
+errors); --lens-blur renders with an optical blur (weather.lens_blur, Gaussian σ in pixels); --refine detects with
+another corner refinement.
 Their results go to accuracy-crfN-lens_blurS-REFINE.md (the parts given).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import pickle
 import time
@@ -35,6 +38,9 @@ from tracking.rig import Rig, load_rig
 
 REPO = Path(__file__).resolve().parents[1]
 CACHE = REPO / "benchmarks" / ".cache"
+TRACKING = REPO / "tracking"
+DETECTION_MODULES = ("camera", "corners", "detection", "images", "marker_tracker", "pipeline", "sources")
+CODE_HASH_CHARS = 10
 RESULTS = REPO / "benchmarks" / "results" / "accuracy.md"
 WEATHER = "-weather"
 RUNS = {  # scenario -> group, as the paper pools them
@@ -91,13 +97,26 @@ def bit_rate(rig: Rig, duration: float) -> list[float]:
     return [rig.resolve(c.source).stat().st_size * 8 / 1e6 / duration for c in rig.cameras]
 
 
+def detection_code() -> str:
+    """A short hash of the tracking code that detection runs: cached detections are named by it, so a change to
+    corners or detection is never measured on detections of the code before it."""
+    digest = hashlib.sha256()
+    for module in DETECTION_MODULES:
+        digest.update((TRACKING / f"{module}.py").read_bytes())
+    return digest.hexdigest()[:CODE_HASH_CHARS]
+
+
+def detections_cache(scene: Path, variant: str = "") -> Path:
+    """The file of a scene's cached detections for the current detection code (variant: e.g. "-blurred")."""
+    return scene / f"detections{variant}-{detection_code()}.pkl"
+
+
 def detect(name: str, scene: Path, refinement: Refinement = DEFAULT_REFINEMENT, cache: Path | None = None
            ) -> list[tuple[str, float, dict[int, np.ndarray]]]:
     """A rendered scene's detections (camera, capture time, id -> corners): tracked once, cached with the scene
     (detection is the cost; poses and everything after are recomputed); cache: another file for a variant."""
     if cache is None:
-        cache = scene / ("detections.pkl" if refinement == DEFAULT_REFINEMENT else
-                         f"detections-{refinement.value}.pkl")
+        cache = detections_cache(scene, "" if refinement == DEFAULT_REFINEMENT else f"-{refinement.value}")
     if not cache.is_file():
         rig = with_mounts(load_rig(scene / "rig.yaml"), name)
         cache.write_bytes(pickle.dumps([(r.camera, r.time, {d.id: d.corners for d in r.detections.markers})

@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 import tracking.corners
-from benchmarks.accuracy import detect, measure, render, with_mounts
+from benchmarks.accuracy import detect, detections_cache, measure, render, with_mounts
 from benchmarks.fusion_diagnosis import errors, true_corners
 from tests.synthetic import scale_error
 from tracking import fusion
@@ -46,7 +46,7 @@ def detections(name: str, scene: Path, passes: int) -> tuple[list[tuple[str, flo
     """The scene's detections with that many fine passes (cached beside the accuracy benchmark's), and whether they
     were detected now rather than read from the cache."""
     default = tracking.corners.ITERATIONS - 1
-    cache = scene / ("detections.pkl" if passes == default else f"detections-fine{passes}.pkl")
+    cache = detections_cache(scene, "" if passes == default else f"-fine{passes}")
     fresh = not cache.is_file()
     tracking.corners.ITERATIONS = passes + 1  # this worker process only
     try:

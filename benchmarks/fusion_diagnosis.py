@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from accuracy import CACHE, RESULTS, RUNS, WEATHER, measure, with_mounts
+from accuracy import CACHE, RESULTS, RUNS, WEATHER, detections_cache, measure, with_mounts
 
 from tracking import fusion
 from tracking.evaluate import truth_at
@@ -173,10 +173,11 @@ def main() -> None:
         if args.only is not None and name not in args.only:
             continue
         scene = CACHE / f"{name}{WEATHER}-15fps"
-        if not (scene / "detections.pkl").is_file():
+        cache = detections_cache(scene)
+        if not cache.is_file():
             continue
         rig = with_mounts(load_rig(scene / "rig.yaml"), name)
-        detections = pickle.loads((scene / "detections.pkl").read_bytes())
+        detections = pickle.loads(cache.read_bytes())
         measurements = measure(rig, detections)
         truth = pd.read_csv(scene / "truth.csv")
         monitored = sorted({p.cone for p in rig.all_pairs()})
