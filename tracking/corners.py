@@ -12,11 +12,15 @@ the image look-ups are distorted; the corners are re-distorted at the end. Every
 over the edges of all markers of a frame.
 
 The area edge reads its black and white levels half a cell inside and outside the edge. Where the optics blur
-over more than about a sixth of a cell, the neighbouring edges (code cells, the plate's edge) reach those levels
-and bias the edge (benchmarks/corner_scale.py: up to +7 per mille of scale at 2.8 px cells and 1 px blur). With
-blur_model (`--refine blurred`) the fine pass instead fits each profile with a blurred model of the marker's
-cross-section (inner cell, border, quiet cell, beyond), on markers whose cells are 2 to 8 px across: within
-0.5 per mille on blurred renders, but no better on the simulator's sharp pictures (see the README).
+over more than about a sixth of a cell, the neighbouring edges (white code cells inside, the plate's edge outside
+a one-cell quiet zone) reach those levels and bias the edge: up to +7 per mille of scale at 2.8 px cells and 1 px
+blur (benchmarks/corner_scale.py). So each fine profile also samples the next cells in and out (1.5 cells from the
+edge); how much brighter an edge's black level reads beside its white code cells than beside its black ones gives
+the share of a neighbour's contrast the blur carries to the levels (the "glow", hence the marker's blur), and each
+level loses that share of its neighbour's contrast (_glow). That takes the bias to within 0.5 per mille wherever
+the blur is under a third of a cell. With blur_model (`--refine blurred`) the fine pass instead fits each profile
+with a blurred model of the marker's cross-section (inner cell, border, quiet cell, beyond), on markers whose cells
+are 2 to 8 px across (see the README).
 
 It needs the marker's white quiet zone (one cell at least); where an edge cannot be fitted
 (occlusion, no contrast, a corner moving too far) the marker keeps its input corners. Accuracy drops
@@ -38,6 +42,10 @@ COARSE_MAX_PX = 4.0  # ... but never further than this
 MIN_GRADIENT = 3.0  # grey levels per pixel: weakest step the coarse pass accepts
 LEVEL_AT = 0.5  # black / white levels are read this many cells inside / outside the edge
 LEVEL_MAX_PX = 4.0  # ... but never further than this from the edge (large markers)
+NEXT_CELL_AT = 1.5  # cells either side of the edge: the next cells, whose blur reaches the levels (_glow)
+MIN_GLOW_PROFILES = 2  # profiles next to a white and to a black code cell an edge needs to measure the glow
+MIN_GLOW, MAX_GLOW = 1e-4, 0.3  # the range of the share of a neighbouring cell's contrast taken for glow
+MAX_EXPONENT = 50.0  # exp() beyond this is a share of 0 anyway
 HALF_WINDOW = 0.42  # integration half-width across the edge, in cells
 HALF_WINDOW_MAX_PX = 3.0  # ... capped for large markers (wider windows only add noise)
 HALF_WINDOW_MIN_PX = 0.75
@@ -170,7 +178,8 @@ def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, 
     n_off = int(np.ceil(np.max(half) / PROFILE_STEP_PX))
     step = half / n_off  # (B, 4) sample spacing across each edge
     d = half[..., None] * (np.arange(-n_off, n_off + 1) / n_off)  # (B, 4, M)
-    offsets = d if coarse else np.concatenate([-level[..., None], d, level[..., None]], axis=2)
+    beyond = (NEXT_CELL_AT * cell_across)[..., None]  # (B, 4, 1): the next cells in and out (code cell, quiet zone)
+    offsets = d if coarse else np.concatenate([-beyond, -level[..., None], d, level[..., None], beyond], axis=2)
 
     def profiles(rows: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Samples (R, 4, N, M) at offsets (R, 4, M) across the edges of quads rows, and where all are inside."""
@@ -183,7 +192,7 @@ def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, 
     if coarse:
         e, found = _gradient_edge(values, step)
     else:
-        e, found = _area_edge(values, half, step)
+        e, found = _area_edge(values, half, step, cell_across)
         found &= np.abs(e) < half[..., None]
         rows = np.flatnonzero(modelled.any(axis=1)) if modelled is not None else []
         if len(rows):  # the blurred-profile model on these markers' modelled edges
@@ -268,9 +277,38 @@ def _smooth(v: np.ndarray) -> np.ndarray:
     return 0.25 * padded[..., :-2] + 0.5 * padded[..., 1:-1] + 0.25 * padded[..., 2:]
 
 
-def _area_edge(values: np.ndarray, half: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Area edge offsets (B, 4, N) from [black, profile..., white] samples (B, 4, N, M+2), and which are usable."""
-    black, white, prof = _smooth(values[..., 0]), _smooth(values[..., -1]), values[..., 1:-1]
+def _glow(inner: np.ndarray, black: np.ndarray, white: np.ndarray, cell: np.ndarray) -> np.ndarray:
+    """Share (B, 4) of a neighbouring cell's contrast that the blur carries half a cell into each edge's levels.
+
+    From inner cells, black and white levels (B, 4, N) and cell widths across the edges (B, 4): per edge, how much
+    brighter the black level reads next to a white code cell than next to a black one, over the white cell's
+    contrast (edges with at least MIN_GLOW_PROFILES of each); that share, Φ(-cell / 2σ), gives a blur σ per edge,
+    their median the marker's blur, and the marker's blur each edge's share at its own cell width.
+    """
+    lit = (inner > 0.5 * (black + white)).reshape(-1, inner.shape[-1])
+    rows, cells = black.reshape(lit.shape), inner.reshape(lit.shape)
+    enough = (lit.sum(axis=1) >= MIN_GLOW_PROFILES) & ((~lit).sum(axis=1) >= MIN_GLOW_PROFILES)
+    dark = np.where(enough, _masked_median(rows, ~lit), 0.0)
+    lift = np.where(enough, _masked_median(rows, lit), 0.0) - dark
+    contrast = np.where(enough, _masked_median(cells, lit), 1.0) - dark
+    measured = (enough & (contrast > MIN_CONTRAST)).reshape(-1, 4)
+    share = np.clip(lift / np.maximum(contrast, 1e-9), MIN_GLOW, MAX_GLOW).reshape(-1, 4)
+    sigma = LOGISTIC_SLOPE * 0.5 * cell / np.log(1 / share - 1)  # logistic stand-in for the normal CDF
+    blur = _masked_median(sigma, measured)
+    blur = np.where(np.isfinite(blur), blur, 0.0)[:, None]
+    reach = np.minimum(LOGISTIC_SLOPE * 0.5 * cell / np.maximum(blur, 1e-9), MAX_EXPONENT)  # cell / 2σ, scaled
+    return np.where(blur > 0, 1 / (1 + np.exp(reach)), 0.0)
+
+
+def _area_edge(values: np.ndarray, half: np.ndarray, step: np.ndarray, cell: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Area edge offsets (B, 4, N) from [inner, black, profile..., white, outer] samples (B, 4, N, M+4), and which
+    are usable; the levels lose the glow of the cells beyond them (_glow)."""
+    inner, black, white, outer = values[..., 0], values[..., 1], values[..., -2], values[..., -1]
+    glow = np.minimum(_glow(inner, black, white, cell), MAX_GLOW)[..., None]
+    black = _smooth(black - glow * np.maximum(inner - black, 0.0))
+    white = _smooth(white + glow * np.maximum(white - outer, 0.0))
+    prof = values[..., 2:-2]
     contrast = white - black
     found = contrast > MIN_CONTRAST
     norm = (prof - black[..., None]) / np.where(found, contrast, 1.0)[..., None]
