@@ -106,9 +106,12 @@ def detection_code() -> str:
     return digest.hexdigest()[:CODE_HASH_CHARS]
 
 
+DETECTION_CODE = detection_code()  # at import: the code this process (and the workers it forks) runs
+
+
 def detections_cache(scene: Path, variant: str = "") -> Path:
-    """The file of a scene's cached detections for the current detection code (variant: e.g. "-blurred")."""
-    return scene / f"detections{variant}-{detection_code()}.pkl"
+    """The file of a scene's cached detections for the detection code loaded (variant: e.g. "-blurred")."""
+    return scene / f"detections{variant}-{DETECTION_CODE}.pkl"
 
 
 def detect(name: str, scene: Path, refinement: Refinement = DEFAULT_REFINEMENT, cache: Path | None = None

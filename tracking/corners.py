@@ -18,7 +18,7 @@ blur (benchmarks/corner_scale.py). So each fine profile also samples the next ce
 edge); how much brighter an edge's black level reads beside its white code cells than beside its black ones gives
 the share of a neighbour's contrast the blur carries to the levels (the "glow", hence the marker's blur), and each
 level loses that share of its neighbour's contrast (_glow). That takes the bias to within 0.5 per mille wherever
-the blur is under a third of a cell. With blur_model (`--refine blurred`) the fine pass instead fits each profile
+the blur is under a third of a cell; edges whose cells are under 2.5 px across (seen edge-on) are left alone. With blur_model (`--refine blurred`) the fine pass instead fits each profile
 with a blurred model of the marker's cross-section (inner cell, border, quiet cell, beyond), on markers whose cells
 are 2 to 8 px across (see the README).
 
@@ -45,6 +45,8 @@ LEVEL_MAX_PX = 4.0  # ... but never further than this from the edge (large marke
 NEXT_CELL_AT = 1.5  # cells either side of the edge: the next cells, whose blur reaches the levels (_glow)
 MIN_GLOW_PROFILES = 2  # profiles next to a white and to a black code cell an edge needs to measure the glow
 MIN_GLOW, MAX_GLOW = 1e-4, 0.3  # the range of the share of a neighbouring cell's contrast taken for glow
+MIN_GLOW_CELL_PX = 2.5  # edges with thinner cells across (seen edge-on) neither measure the glow nor lose it: their
+# levels sit on their own edge's ramp, and their shares are mostly noise
 MAX_EXPONENT = 50.0  # exp() beyond this is a share of 0 anyway
 HALF_WINDOW = 0.42  # integration half-width across the edge, in cells
 HALF_WINDOW_MAX_PX = 3.0  # ... capped for large markers (wider windows only add noise)
@@ -291,13 +293,13 @@ def _glow(inner: np.ndarray, black: np.ndarray, white: np.ndarray, cell: np.ndar
     dark = np.where(enough, _masked_median(rows, ~lit), 0.0)
     lift = np.where(enough, _masked_median(rows, lit), 0.0) - dark
     contrast = np.where(enough, _masked_median(cells, lit), 1.0) - dark
-    measured = (enough & (contrast > MIN_CONTRAST)).reshape(-1, 4)
+    measured = (enough & (contrast > MIN_CONTRAST)).reshape(-1, 4) & (cell >= MIN_GLOW_CELL_PX)
     share = np.clip(lift / np.maximum(contrast, 1e-9), MIN_GLOW, MAX_GLOW).reshape(-1, 4)
     sigma = LOGISTIC_SLOPE * 0.5 * cell / np.log(1 / share - 1)  # logistic stand-in for the normal CDF
     blur = _masked_median(sigma, measured)
     blur = np.where(np.isfinite(blur), blur, 0.0)[:, None]
     reach = np.minimum(LOGISTIC_SLOPE * 0.5 * cell / np.maximum(blur, 1e-9), MAX_EXPONENT)  # cell / 2σ, scaled
-    return np.where(blur > 0, 1 / (1 + np.exp(reach)), 0.0)
+    return np.where((blur > 0) & (cell >= MIN_GLOW_CELL_PX), 1 / (1 + np.exp(reach)), 0.0)
 
 
 def _area_edge(values: np.ndarray, half: np.ndarray, step: np.ndarray, cell: np.ndarray
