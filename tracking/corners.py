@@ -18,9 +18,10 @@ blur (benchmarks/corner_scale.py). So each fine profile also samples the next ce
 edge); how much brighter an edge's black level reads beside its white code cells than beside its black ones gives
 the share of a neighbour's contrast the blur carries to the levels (the "glow", hence the marker's blur), and each
 level loses that share of its neighbour's contrast (_glow). That takes the bias to within 0.5 per mille wherever
-the blur is under a third of a cell; edges whose cells are under 2.5 px across (seen edge-on) are left alone. With blur_model (`--refine blurred`) the fine pass instead fits each profile
-with a blurred model of the marker's cross-section (inner cell, border, quiet cell, beyond), on markers whose cells
-are 2 to 8 px across (see the README).
+the blur is under a third of a cell; edges whose cells are under 2.5 px across (seen edge-on) are left alone.
+With blur_model (`--refine blurred`) the fine pass instead fits each profile with a blurred model of the marker's
+cross-section (inner cell, border, quiet cell, beyond), on markers whose cells are 2 to 8 px across (see the
+README).
 
 It needs the marker's white quiet zone (one cell at least); where an edge cannot be fitted
 (occlusion, no contrast, a corner moving too far) the marker keeps its input corners. Accuracy drops
