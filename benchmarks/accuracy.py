@@ -18,6 +18,7 @@ Their results go to accuracy-crfN-lens_blurS-REFINE.md (the parts given).
 from __future__ import annotations
 
 import argparse
+import ast
 import hashlib
 import json
 import pickle
@@ -41,6 +42,7 @@ CACHE = REPO / "benchmarks" / ".cache"
 TRACKING = REPO / "tracking"
 DETECTION_MODULES = ("camera", "corners", "detection", "images", "marker_tracker", "pipeline", "sources")
 CODE_HASH_CHARS = 10
+DOCUMENTED = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)  # nodes whose docstrings the hash skips
 RESULTS = REPO / "benchmarks" / "results" / "accuracy.md"
 WEATHER = "-weather"
 RUNS = {  # scenario -> group, as the paper pools them
@@ -97,12 +99,18 @@ def bit_rate(rig: Rig, duration: float) -> list[float]:
     return [rig.resolve(c.source).stat().st_size * 8 / 1e6 / duration for c in rig.cameras]
 
 
-def detection_code() -> str:
-    """A short hash of the tracking code that detection runs: cached detections are named by it, so a change to
-    corners or detection is never measured on detections of the code before it."""
+def detection_code(tracking: Path = TRACKING) -> str:
+    """A short hash of the tracking code that detection runs, docstrings and comments left out: cached detections
+    are named by it, so a change to corners or detection is never measured on detections of the code before it."""
     digest = hashlib.sha256()
     for module in DETECTION_MODULES:
-        digest.update((TRACKING / f"{module}.py").read_bytes())
+        tree = ast.parse((tracking / f"{module}.py").read_text())
+        for node in ast.walk(tree):
+            body = getattr(node, "body", None)
+            if isinstance(node, DOCUMENTED) and body and isinstance(body[0], ast.Expr) \
+                    and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str):
+                node.body = body[1:]
+        digest.update(ast.dump(tree).encode())
     return digest.hexdigest()[:CODE_HASH_CHARS]
 
 

@@ -2,8 +2,8 @@
 
 The edge fit runs a coarse pass, then ITERATIONS - 1 fine passes (tracking/corners.py). The coarse pass can land
 half a pixel off on small cells, and one fine pass from there reads its black or white level on the edge's own
-ramp; a second fine pass removes that, but then the area edge's own bias under blur (its levels read half a cell
-from the edge, where the neighbouring edges' blur reaches: benchmarks/corner_scale.py) is all that is left.
+ramp; a second fine pass removes that. Under blur the neighbouring edges' glow in the levels is taken out (the glow
+correction, benchmarks/corner_scale.py), yet one pass still does better there, for a reason not found yet.
 
 Procedures 1 and 2 (configuration 1, fog and rain, CRF 22, 15 FPS) from the accuracy benchmark's cache, rendered
 sharp (the scenarios' default) and with weather.lens_blur 0.7 px, are detected with one and with two fine passes.
