@@ -178,7 +178,7 @@ def render_installation(folder, motion, times: dict[str, np.ndarray], dist: np.n
         poses.append((name, T_to_pose(T_jacket_cam)))
         save_camera(folder / f"calibration/{name}.yaml", CameraModel(PAPER_K, dist, *PAPER_SIZE))
         cams.append({"name": name, "calibration": f"calibration/{name}.yaml", "source": f"{name}.mp4",
-                     "time_offset": float(times[name][0])})
+                     "time_offset": float(times[name][0]), "mount": "drone"})  # the filter's loosest prior
         with av.open(str(folder / f"{name}.mp4"), "w") as out:
             stream = out.add_stream("libx264", rate=30)
             stream.width, stream.height = PAPER_SIZE

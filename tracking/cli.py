@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import math
+import signal
 import sys
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -17,10 +20,12 @@ from tracking.calibration import SUBPIX_WINDOW
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import EXIT_BAD_INPUT, InputError
 from tracking.fusion import ESTIMATORS
+from tracking.outputs import Outputs, atomic_path, check_outputs
 
 if TYPE_CHECKING:
     import pandas as pd
 
+    from tracking.pipeline import TrackStats
     from tracking.rig import Rig
     from viewer.archive import ArchiveSink
 
@@ -57,6 +62,43 @@ def _archive_options(key: Path | None, video: str) -> Ed25519PrivateKey | None:
     return load_private_key(key) if key is not None else None
 
 
+EXIT_INTERRUPTED = 130  # the shell's code for a command ended by Ctrl-C
+
+
+def _finite(low: float, low_open: bool = True, high: float = math.inf, allow_inf: bool = False
+            ) -> Callable[[float | None], float | None]:
+    """A typer callback refusing NaN, infinities (unless allow_inf) and values outside (low, high] (or [low, high])."""
+
+    def check(value: float | None) -> float | None:
+        if value is None:
+            return value
+        inside = (value > low if low_open else value >= low) and value <= high
+        if math.isnan(value) or (math.isinf(value) and not allow_inf) or not inside:
+            bound = f"{'>' if low_open else '≥'} {low:g}" + (f" and ≤ {high:g}" if math.isfinite(high) else "")
+            raise typer.BadParameter(f"{value} is not a finite number {bound}")
+        return value
+
+    return check
+
+
+def rig_inputs(rig: Rig) -> list[Path]:
+    """Every file a rig reads: itself, its calibration files and its video files (devices and streams are not files)."""
+    from tracking.sources import SourceKind, source_kind
+
+    files = [rig.path]
+    for cam in rig.cameras:
+        files.append(rig.resolve(cam.calibration))
+        if source_kind(cam.source) == SourceKind.FILE:
+            files.append(rig.resolve(cam.source))
+    return files
+
+
+def _warn_rig(rig: Rig) -> None:
+    """The rig's warnings (defaults that cost accuracy), one line each on stderr."""
+    for warning in getattr(rig, "warnings", ()):
+        err_console.print(f"topside: warning: {warning}", markup=False)
+
+
 def _progress() -> Progress:
     return Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                     TimeElapsedColumn(), console=err_console, transient=True)
@@ -70,8 +112,8 @@ def calibrate(
     out: Annotated[Path, typer.Option("-o", "--out", help="Camera file to write (OpenCV YAML).")],
     fix_aspect: Annotated[bool, typer.Option("--fix-aspect", help="Keep fx = fy (CALIB_FIX_ASPECT_RATIO).")] = False,
     rational: Annotated[bool, typer.Option("--rational", help="8-coefficient rational distortion model.")] = False,
-    subpix_window: Annotated[int, typer.Option(help="Half-size of cornerSubPix's window, px (chessboard).")
-                             ] = SUBPIX_WINDOW,
+    subpix_window: Annotated[int, typer.Option(help="Half-size of cornerSubPix's window, px (chessboard).",
+                                               min=1, max=MAX_SUBPIX_WINDOW)] = SUBPIX_WINDOW,
 ) -> None:
     """Calibrate one camera from photos of a chessboard or ChArUco board."""
     from rich.table import Table
@@ -80,6 +122,7 @@ def calibrate(
     from tracking.camera import save_camera
 
     spec = calib.parse_board(board)
+    check_outputs({"--out": out}, images)
     with _progress() as progress:
         task = progress.add_task("finding the board", total=len(images))
         result = calib.calibrate(images, spec, fix_aspect=fix_aspect, rational=rational,
@@ -107,13 +150,18 @@ def calibrate(
     console.print(f"wrote {out}")
 
 
+MAX_SUBPIX_WINDOW = 50  # px: cornerSubPix's window beyond this spans several squares of any usable board
+MAX_MARKER_SIZE_M = 100.0  # a marker edge beyond this is a typo (mm for m)
+
+
 @app.command()
 def detect(
     source: Annotated[Path, typer.Argument(help="An image or a video.")],
     dictionary: Annotated[str | None, typer.Option(help="DICT_6X6_250 (default) or a dictionary YAML.")] = None,
     rig: Annotated[Path | None, typer.Option(help="Rig file: its dictionary, marker size and ids.")] = None,
     camera: Annotated[Path | None, typer.Option(help="Camera file: also estimate every marker's pose.")] = None,
-    marker_size: Annotated[float | None, typer.Option(help="Marker edge in m (default: the rig's, or 1.0).")] = None,
+    marker_size: Annotated[float | None, typer.Option(help="Marker edge in m (default: the rig's, or 1.0).",
+                                                      callback=_finite(0.0, high=MAX_MARKER_SIZE_M))] = None,
     refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = DEFAULT_REFINEMENT,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per frame.")] = False,
 ) -> None:
@@ -127,6 +175,8 @@ def detect(
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig) if rig else None
+    if the_rig is not None:
+        _warn_rig(the_rig)
     if dictionary and the_rig and dictionary != the_rig.dictionary:
         raise InputError("--dictionary", f"{dictionary} differs from the rig's {the_rig.dictionary}")
     cam = load_camera(camera) if camera else None
@@ -196,58 +246,89 @@ def track(
     video: VideoOption = "jpeg",
 ) -> None:
     """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording."""
-    from rich.table import Table
-
     from tracking.evaluate import read_truth
     from tracking.pipeline import TrackStats, source_frame_count, track_rig
-    from tracking.report import write_offsets_csv
+    from tracking.report import OffsetsWriter
     from tracking.rig import load_rig
 
     if mode not in ESTIMATORS:
         raise InputError("--mode", f"{mode!r} is not a mode (expected {', '.join(ESTIMATORS)})")
     estimator = ESTIMATORS[mode]
     the_rig = load_rig(rig)
+    _warn_rig(the_rig)
+    check_outputs({"--out": out, "--rrd": rrd, "--mcap": mcap}, [*rig_inputs(the_rig), truth, key])
     truth_df = read_truth(truth) if truth else None
+    private = _archive_options(key, video) if mcap is not None else None  # read before any work starts
     options = {"mode": mode, "refine": refine.value}
-    sinks = []  # the CLI composes tracker and viewer; tracking/ never imports viewer
-    if rrd is not None:
-        from viewer.session import Recorder
-
-        sinks.append(Recorder(the_rig, rrd, truth_df, show_rejected=rejected, options=options))
-    if mcap is not None:
-        sinks.append(_archive_sink(the_rig, mcap, options, truth_df, key, out, vessel, operator, video))
     stats = TrackStats()
     totals = [source_frame_count(the_rig.resolve(c.source)) for c in the_rig.cameras]
     total = sum(t for t in totals if t) or None
-    with _progress() as progress:
-        task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras", total=total)
+    outputs = Outputs(keep_on_interrupt=True)
+    writer: OffsetsWriter | None = None
+    try:
+        with outputs, _progress() as progress:
+            csv_partial = outputs.claim(out)
+            sinks = []  # the CLI composes tracker and viewer; tracking/ never imports viewer
+            if rrd is not None:
+                from viewer.session import Recorder
 
-        def measurements():
-            for result in track_rig(the_rig, refine, packets=bool(sinks)):
-                stats.add(result)
-                progress.advance(task)
-                for sink in sinks:
-                    sink.on_frame(result)
-                yield from result.offsets
-                if result.observation is not None:
-                    yield result.observation
+                sinks.append(Recorder(the_rig, outputs.claim(rrd), truth_df, show_rejected=rejected,
+                                      options=options))
+            if mcap is not None:
+                sinks.append(_archive_sink(the_rig, outputs.claim(mcap), options, truth_df, private, csv_partial,
+                                           vessel, operator, video))
+            task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras", total=total)
 
-        def recorded(estimates):
-            for e in estimates:
-                for sink in sinks:
-                    sink.on_estimate(e)
-                yield e
+            def measurements():
+                for result in track_rig(the_rig, refine, packets=bool(sinks)):
+                    stats.add(result)
+                    progress.advance(task)
+                    for sink in sinks:
+                        sink.on_frame(result)
+                    yield from result.offsets
+                    if result.observation is not None:
+                        yield result.observation
 
-        estimates = estimator(the_rig, measurements())
+            try:
+                with OffsetsWriter(csv_partial) as writer:
+                    for e in estimator(the_rig, measurements()):
+                        for sink in sinks:
+                            sink.on_estimate(e)
+                        writer.write(e)
+            finally:
+                _close_sinks(sinks)
+    except KeyboardInterrupt:
+        kept = ", ".join(map(str, outputs.kept)) or "nothing"
+        err_console.print(f"stopped after {writer.rows if writer else 0} rows; what was written is kept in {kept}",
+                          markup=False)
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    _print_track_summary(the_rig, rig, mode, stats)
+    console.print(f"wrote {writer.rows if writer else 0} rows to {out}")
+    if rrd is not None:
+        console.print(f"wrote {rrd} (open it with: topside view {rrd})")
+    if mcap is not None:
+        console.print(f"wrote {mcap} (check it with: topside verify {mcap})")
+
+
+def _close_sinks(sinks: list) -> None:
+    """Close every sink; while an error propagates, a sink that fails to close does not hide it."""
+    failing = sys.exc_info()[1] is not None
+    for sink in sinks:
         try:
-            n_rows = write_offsets_csv(out, recorded(estimates))
-        finally:
-            for sink in sinks:
-                sink.close()
-    table = Table(title=f"tracked {rig} ({mode} mode)")
+            sink.close()
+        except Exception:
+            if not failing:
+                raise
+
+
+def _print_track_summary(rig: Rig, rig_path: Path, mode: str, stats: TrackStats) -> None:
+    """The run's table per camera, and what it ignored."""
+    from rich.table import Table
+
+    table = Table(title=f"tracked {rig_path} ({mode} mode)")
     for col in ("camera", "frames", "markers", "pair offsets", "ambiguous"):
         table.add_column(col, justify="right" if col != "camera" else "left")
-    for cam in the_rig.cameras:
+    for cam in rig.cameras:
         n = cam.name
         table.add_row(n, str(stats.frames[n]), str(stats.markers[n]), str(stats.pair_offsets[n]),
                       str(stats.ambiguous[n]))
@@ -255,19 +336,14 @@ def track(
     if stats.unknown_ids:
         summary = ", ".join(f"id {i}: {n}" for i, n in sorted(stats.unknown_ids.items()))
         console.print(f"[yellow]markers not in the rig (ignored): {summary}[/yellow]")
-    console.print(f"wrote {n_rows} rows to {out}")
-    if rrd is not None:
-        console.print(f"wrote {rrd} (open it with: topside view {rrd})")
-    if mcap is not None:
-        console.print(f"wrote {mcap} (check it with: topside verify {mcap})")
 
 
-def _archive_sink(rig: Rig, path: Path, options: dict[str, str], truth_df: pd.DataFrame | None, key: Path | None,
-                  offsets_csv: Path | None, vessel: str, operator: str, video: str) -> ArchiveSink:
+def _archive_sink(rig: Rig, path: Path, options: dict[str, str], truth_df: pd.DataFrame | None,
+                  private: Ed25519PrivateKey | None, offsets_csv: Path | None, vessel: str, operator: str, video: str
+                  ) -> ArchiveSink:
     """The MCAP archive writer for `track --mcap`."""
     from viewer.archive import ArchiveSink
 
-    private = _archive_options(key, video)
     return ArchiveSink(rig, path, options, {"vessel": vessel, "operator": operator}, truth_df, private, offsets_csv,
                        video=video)
 
@@ -285,11 +361,13 @@ def export(
     """Write the MCAP audit archive of a recording: the same content `track --mcap` writes."""
     from viewer.export import export_recording
 
+    check_outputs({"--mcap": mcap}, [recording, offsets, key])
     private = _archive_options(key, video)
     if offsets is not None and not offsets.is_file():
         raise InputError(offsets, "offsets CSV not found", "--offsets")
-    n = export_recording(recording, mcap, {"vessel": vessel, "operator": operator}, private,
-                         offsets.read_bytes() if offsets else None, video)
+    with atomic_path(mcap) as partial:
+        n = export_recording(recording, partial, {"vessel": vessel, "operator": operator}, private,
+                             offsets.read_bytes() if offsets else None, video)
     console.print(f"wrote {mcap}: {n} messages (check it with: topside verify {mcap})")
 
 
@@ -307,21 +385,29 @@ def verify(
                                                                  "NAME.recovered.mcap).")] = None,
 ) -> None:
     """Check an archive: CRCs, indexes, every channel non-empty, the manifest's SHA-256 digests, the signature."""
+    from viewer.audit import is_intact
     from viewer.audit import recover as recover_file
     from viewer.audit import verify as verify_file
     from viewer.manifest import load_public_key, time_text
 
     public = load_public_key(key) if key is not None else None
     if recover:
-        r = recover_file(archive, out or archive.with_suffix(".recovered.mcap"))
-        console.print(f"recovered {r.messages} messages in {r.chunks} chunks up to "
-                      f"{time_text(r.last_ns) if r.last_ns is not None else '-'}; {r.chunks_damaged} damaged chunks "
-                      f"and {r.bytes_dropped} trailing bytes dropped", soft_wrap=True)
-        if r.manifest_was_missing:
-            console.print("[yellow]the manifest was missing (the writer did not close); the recovered file carries "
-                          "its own, marked 'recovered'[/yellow]", soft_wrap=True)
-        console.print(f"wrote {r.out}")
-        archive = r.out
+        target = out or archive.with_name(f"{archive.stem}.recovered.mcap")
+        check_outputs({"--out": target}, [archive, key])
+        if is_intact(archive):
+            console.print(f"{archive} is intact (a finished writer's summary, indexes and manifest all check): "
+                          "nothing to recover, nothing written", markup=False, soft_wrap=True)
+        else:
+            with atomic_path(target) as partial:
+                r = recover_file(archive, partial)
+            console.print(f"recovered {r.messages} messages in {r.chunks} chunks up to "
+                          f"{time_text(r.last_ns) if r.last_ns is not None else '-'}; {r.chunks_damaged} damaged "
+                          f"chunks and {r.bytes_dropped} trailing bytes dropped", soft_wrap=True)
+            if r.manifest_was_missing:
+                console.print("[yellow]the manifest was missing (the writer did not close); the recovered file "
+                              "carries its own, marked 'recovered'[/yellow]", soft_wrap=True)
+            console.print(f"wrote {target}")
+            archive = target
     report = verify_file(archive, public)
     for note in report.notes:
         console.print(f"note: {note}", markup=False, soft_wrap=True)
@@ -366,40 +452,52 @@ LIVE_ESTIMATE_PERIOD_S = 1 / 30  # the recording keeps a cone's estimates at up 
 def live(
     rig: Annotated[Path, typer.Option(help="Rig file; each camera's source is a device index, a stream URL "
                                            "(rtsp://, http://) or a video file replayed at its frame rate.")],
-    rrd: Annotated[Path, typer.Option(help="Recording to write, in segments <stem>-NNN.rrd.")
-                   ] = Path("recordings/live.rrd"),
-    out: Annotated[Path, typer.Option("-o", "--out", help="Offsets CSV, written as they are measured.")
-                   ] = Path("recordings/live-offsets.csv"),
+    rrd: Annotated[Path | None, typer.Option(help="Recording to write, in segments <stem>-NNN.rrd (default: "
+                                                  "recordings/live-<date>-<time>.rrd).")] = None,
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="Offsets CSV, written as they are measured "
+                                                                 "(default: beside the recording).")] = None,
     spawn: Annotated[bool, typer.Option("--spawn", help="Stream to a native viewer.")] = False,
     web: Annotated[bool, typer.Option("--web", help="Serve the web viewer (a tablet on the stern).")] = False,
     bind: Annotated[str, typer.Option(help="Address the web viewer listens on.")] = "127.0.0.1",
-    stale: Annotated[float, typer.Option(help="Seconds after which a cone shows NO DATA.")] = 0.5,
-    segment_minutes: Annotated[float, typer.Option(help="Minutes of capture time per recording file.")
-                               ] = LIVE_SEGMENT_MIN,
-    speed: Annotated[float, typer.Option(help="Replay speed of video files (1: real time; inf: flat out).")] = 1.0,
-    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds of capture time.")] = None,
+    stale: Annotated[float, typer.Option(help="Seconds after which a cone shows NO DATA.",
+                                         callback=_finite(0.0))] = 0.5,
+    segment_minutes: Annotated[float, typer.Option(help="Minutes of capture time per recording file.",
+                                                   callback=_finite(0.0))] = LIVE_SEGMENT_MIN,
+    speed: Annotated[float, typer.Option(help="Replay speed of video files (1: real time; inf: flat out).",
+                                         callback=_finite(0.0, allow_inf=True))] = 1.0,
+    duration: Annotated[float | None, typer.Option(help="Stop after this many seconds of capture time.",
+                                                   callback=_finite(0.0))] = None,
     layout: Annotated[str, typer.Option(help="Layout stored in the recording: superintendent or analysis.")
                       ] = "superintendent",
 ) -> None:
     """Track every camera live, fuse them, record, and stream to the superintendent's view."""
+    import time
+
     from tracking.live import LiveTracker
-    from tracking.report import write_offsets_csv
+    from tracking.report import OffsetsWriter
     from tracking.rig import load_rig
     from viewer.playback import start_live_viewer, stop_viewer
     from viewer.session import Recorder
 
-    if stale <= 0 or segment_minutes <= 0 or speed <= 0:
-        raise InputError("--stale/--segment-minutes/--speed", "must be positive")
     if spawn and web:
         raise InputError("--spawn/--web", "choose one viewer")
     if layout not in ("superintendent", "analysis"):
         raise InputError("--layout", f"{layout!r} is not a layout (expected superintendent or analysis)")
     the_rig = load_rig(rig)
+    _warn_rig(the_rig)
+    rrd = rrd or Path("recordings") / f"live-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
+    out = out or rrd.with_name(f"{rrd.stem}-offsets.csv")
+    check_outputs({"--out": out, "--rrd": rrd}, rig_inputs(the_rig))
+    for path, option in ((out, "--out"), (rrd.with_name(f"{rrd.stem}.segments.csv"), "--rrd")):
+        if path.exists():
+            raise InputError(path, "exists (an earlier session's record; a live session never overwrites one): "
+                                   "expected another name", option)
     viewer_url, viewer_process = start_live_viewer(web, bind) if (spawn or web) else (None, None)
     if web:
         console.print(f"web viewer: http://{bind}:9090/?url={viewer_url}")
-    recorder = Recorder(the_rig, rrd, viewer=viewer_url, segment_s=segment_minutes * 60, stale_s=stale, layout=layout,
-                        estimate_period_s=LIVE_ESTIMATE_PERIOD_S)
+    outputs = Outputs()  # every end (done, Ctrl-C, SIGTERM, a failure) keeps what was recorded, under its name
+    writer: OffsetsWriter | None = None
+    recorder: Recorder | None = None
 
     def estimates(tracker: LiveTracker):
         start = None  # capture time of the first frame
@@ -413,18 +511,27 @@ def live(
                 if duration is not None and update.results[-1].time - start >= duration:
                     return
 
-    n_rows = 0
     try:
-        with LiveTracker(the_rig, speed=speed) as tracker:
-            console.print(f"live: {len(tracker.names)} cameras; Ctrl-C stops and keeps everything recorded")
-            n_rows = write_offsets_csv(out, estimates(tracker))
+        recorder = Recorder(the_rig, rrd, viewer=viewer_url, segment_s=segment_minutes * 60, stale_s=stale,
+                            layout=layout, estimate_period_s=LIVE_ESTIMATE_PERIOD_S)
+        with OffsetsWriter(outputs.claim(out)) as writer:
+            console.print(f"recording to {rrd.with_name(rrd.stem + '-*.rrd')} and {writer.path} (renamed {out.name} "
+                          "when the session ends)", markup=False, soft_wrap=True)
+            with LiveTracker(the_rig, speed=speed) as tracker:
+                console.print(f"live: {len(tracker.names)} cameras; Ctrl-C stops and keeps everything recorded")
+                for e in estimates(tracker):
+                    writer.write(e)
     except KeyboardInterrupt:
         err_console.print("stopped")
     finally:
-        recorder.close()
-        if viewer_process is not None and not spawn:
-            stop_viewer(viewer_process)
-    console.print(f"wrote {n_rows} rows to {out}; recording {rrd.with_name(rrd.stem + '-*.rrd')}")
+        try:
+            if recorder is not None:
+                recorder.close()
+        finally:
+            outputs.commit()  # what was measured is the record of the lift, however the session ended
+            if viewer_process is not None and not spawn:
+                stop_viewer(viewer_process)
+    console.print(f"wrote {writer.rows if writer else 0} rows to {out}; recording {rrd.with_name(rrd.stem + '-*.rrd')}")
 
 
 @app.command()
@@ -508,13 +615,41 @@ def demo(
         console.print(f"open the recording with:  .venv/bin/topside view {rrd}   (or --web for a browser)")
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGTERM ends a command as Ctrl-C does: outputs are completed or removed, recordings kept, children stopped."""
+    raise KeyboardInterrupt
+
+
+def _one_line(text: str) -> str:
+    """A message on one line."""
+    return " ".join(str(text).split())
+
+
 def main() -> None:
-    """Console entry point: bad input becomes one line on stderr and exit status 2."""
-    try:
+    """Console entry point: bad input (files, options, usage) becomes one line on stderr and exit status 2."""
+    if len(sys.argv) <= 1:  # no command: the help, as typer prints it
         app()
+        return
+    signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        code = app(standalone_mode=False)
     except InputError as exc:
-        err_console.print(f"topside: error: {exc}", markup=False)
+        err_console.print(f"topside: error: {_one_line(exc)}", markup=False)
         sys.exit(EXIT_BAD_INPUT)
+    except typer.TyperException as exc:  # typer's usage errors: a missing option, a value of the wrong type
+        message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        ctx = getattr(exc, "ctx", None)
+        hint = f" (see: {ctx.command_path} --help)" if ctx is not None else ""
+        err_console.print(f"topside: error: {_one_line(message)}{hint}", markup=False)
+        sys.exit(getattr(exc, "exit_code", EXIT_BAD_INPUT))
+    except (typer.Abort, KeyboardInterrupt):
+        err_console.print("topside: stopped", markup=False)
+        sys.exit(EXIT_INTERRUPTED)
+    except OSError as exc:  # the disk filled, a folder vanished: the environment, named in one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        err_console.print(f"topside: error: {where}{exc.strerror or exc}", markup=False)
+        sys.exit(EXIT_BAD_INPUT)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

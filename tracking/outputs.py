@@ -73,6 +73,35 @@ def partial_path(path: Path) -> Path:
     raise InputError(path, f"cannot be written: {MAX_PARTIALS} temporary files beside it already")
 
 
+def partial_dir(path: Path) -> Path:
+    """A new, empty temporary folder beside path: <name>.partial or <name>.partial-N."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for n in range(1, MAX_PARTIALS):
+        candidate = path.with_name(f"{path.name}{PARTIAL}{'' if n == 1 else f'-{n}'}")
+        try:
+            candidate.mkdir()
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise InputError(path, f"cannot be written ({exc.strerror})") from None
+        return candidate
+    raise InputError(path, f"cannot be written: {MAX_PARTIALS} temporary folders beside it already")
+
+
+def replace_dir(partial: Path, path: Path) -> Path:
+    """Move a complete temporary folder onto path; an earlier folder there (checked replaceable) is removed after."""
+    old = None
+    if path.exists():
+        old = partial_dir(path.with_name(f"{path.name}.old"))
+        old.rmdir()
+        os.replace(path, old)
+    os.replace(partial, path)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return path
+
+
 def commit(partial: Path, path: Path) -> Path:
     """Rename a complete temporary file onto its final name; returns the final name."""
     try:
@@ -120,3 +149,49 @@ def write_bytes(path: Path, data: bytes) -> Path:
 def write_text(path: Path, text: str) -> Path:
     """Write a whole text file atomically."""
     return write_bytes(path, text.encode())
+
+
+class Outputs:
+    """The temporary files of one command's outputs: all renamed into place when the command completes, all removed
+    when it fails; an interrupted recording (keep_on_interrupt) keeps them under their temporary names."""
+
+    def __init__(self, keep_on_interrupt: bool = False) -> None:
+        self.keep_on_interrupt = keep_on_interrupt
+        self.partials: dict[Path, Path] = {}  # final -> temporary
+        self.kept: list[Path] = []  # temporary files left after an interruption
+
+    def claim(self, path: Path | None) -> Path | None:
+        """The temporary file to write for an output (None stays None)."""
+        if path is None:
+            return None
+        partial = partial_path(Path(path))
+        self.partials[Path(path)] = partial
+        return partial
+
+    def commit(self) -> None:
+        """Rename every temporary file that was written onto its final name."""
+        for path, partial in self.partials.items():
+            if partial.exists():
+                commit(partial, path)
+        self.partials = {}
+
+    def discard(self) -> None:
+        """Remove every temporary file."""
+        for partial in self.partials.values():
+            discard(partial)
+        self.partials = {}
+
+    def __enter__(self) -> Outputs:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: object) -> None:
+        if kind is None:
+            self.commit()
+        elif issubclass(kind, KeyboardInterrupt) and self.keep_on_interrupt:
+            self.kept = [p for p in self.partials.values() if p.exists() and p.stat().st_size > 0]
+            for partial in self.partials.values():
+                if partial not in self.kept:
+                    discard(partial)
+            self.partials = {}
+        else:
+            self.discard()

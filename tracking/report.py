@@ -11,21 +11,44 @@ import numpy as np
 from tracking.filtering import ConeEstimate
 
 OFFSET_COLUMNS = ("time", "cone", "dx", "dy", "dz", "cameras", "sdx", "sdy", "sdz")  # sd*: 1σ, m
+FLUSH_ROWS = 100  # rows between flushes: a killed run keeps all but the last few
+
+
+class OffsetsWriter:
+    """An offsets CSV written row by row and flushed every FLUSH_ROWS, so an interrupted run keeps what it measured;
+    `rows` counts what is in the file, however the run ends."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = self.path.open("w", newline="")
+        self._writer = csv.writer(self._file)
+        self._writer.writerow(OFFSET_COLUMNS)
+        self.rows = 0
+
+    def write(self, e: ConeEstimate) -> None:
+        """One estimate as a row."""
+        sd = np.sqrt(np.diag(e.covariance)) if e.covariance is not None else np.full(3, np.nan)
+        self._writer.writerow([f"{e.time:.6f}", e.cone, *(f"{v:.5f}" for v in e.offset), " ".join(e.cameras),
+                               *(f"{v:.5f}" for v in sd)])
+        self.rows += 1
+        if self.rows % FLUSH_ROWS == 0:
+            self._file.flush()
+
+    def close(self) -> None:
+        """Flush and close the file."""
+        self._file.close()
+
+    def __enter__(self) -> OffsetsWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def write_offsets_csv(path: str | Path, estimates: Iterable[ConeEstimate]) -> int:
-    """Stream estimates to CSV (flushed row by row, so an interrupted run keeps what it measured)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    n = 0
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(OFFSET_COLUMNS)
+    """Stream estimates to CSV; returns the number of rows."""
+    with OffsetsWriter(path) as writer:
         for e in estimates:
-            sd = np.sqrt(np.diag(e.covariance)) if e.covariance is not None else np.full(3, np.nan)
-            writer.writerow([f"{e.time:.6f}", e.cone, *(f"{v:.5f}" for v in e.offset), " ".join(e.cameras),
-                             *(f"{v:.5f}" for v in sd)])
-            n += 1
-            if n % 100 == 0:
-                f.flush()
-    return n
+            writer.write(e)
+    return writer.rows

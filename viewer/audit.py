@@ -499,6 +499,12 @@ def _check_checkpoints(s: Scan, key: Ed25519PublicKey | None, manifest: dict | N
     return signature
 
 
+def is_intact(path: Path) -> bool:
+    """True when a finished writer's file checks whole (summary, indexes, manifest): there is nothing to recover.
+    A one-line InputError when it is not an MCAP file."""
+    return verify(path).ok
+
+
 @dataclass(frozen=True)
 class Recovery:
     """What `verify --recover` kept and lost."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import os
 import subprocess
 import sys
@@ -17,16 +18,19 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from tracking.camera import CameraModel, load_camera
+from tracking.errors import InputError
 from tracking.evaluate import truth_at
 from tracking.filtering import ConeEstimate
 from tracking.fusion import cone_points
 from tracking.images import Frame
 from tracking.live import STALE_S, LiveUpdate
+from tracking.outputs import partial_path, write_text
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
 from viewer.archive import ArchiveInputs
 from viewer.blueprint import LayoutSender, analysis_blueprint
 from viewer.playback import rerun_binary
+from viewer.playback import viewer_env as rerun_env  # TODO: rerun_env
 from viewer.recording import (
     APP_ID,
     FILTER_CAMERAS,
@@ -73,32 +77,48 @@ BACKLOG_MAX_PERIOD_S = 60.0  # after timeouts the period doubles up to this (a d
 class Compactor:
     """Rewrites finished recording files with `rerun rrd optimize` in the background (chunks merged: ~25 % smaller).
 
-    The original stays until the compacted copy is complete, so a failure or a kill loses nothing.
+    The source stays until the compacted copy is complete and renamed onto its final name, so a failure or a kill
+    loses nothing; if compaction fails, the source itself is renamed onto the final name.
     """
 
     def __init__(self) -> None:
-        self.running: list[tuple[subprocess.Popen, Path, Path]] = []
+        self.running: list[tuple[subprocess.Popen, Path, Path, Path]] = []
 
-    def start(self, path: Path, layout: Path | None = None) -> None:
-        """Compact one closed file; with a layout (.rbl), that blueprint is merged into it."""
-        tmp = path.with_name(path.name + ".compacting")
+    def start(self, source: Path, layout: Path | None = None, final: Path | None = None) -> None:
+        """Compact one closed file into final (default: in place); with a layout (.rbl), that blueprint is merged in."""
+        final = source if final is None else final
+        if not source.is_file():
+            return
+        tmp = partial_path(final)
         inputs = [str(layout)] if layout is not None and layout.is_file() else []
-        proc = subprocess.Popen(["nice", "-n", "10", rerun_binary(), "rrd", "optimize", *inputs, str(path),
-                                 "-o", str(tmp)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        self.running.append((proc, path, tmp))
+        proc = subprocess.Popen(["nice", "-n", "10", rerun_binary(), "rrd", "optimize", *inputs, str(source),
+                                 "-o", str(tmp)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                env=rerun_env(), start_new_session=True)
+        self.running.append((proc, source, tmp, final))
 
     def poll(self, wait: bool = False) -> None:
-        """Replace the files whose compaction has finished (all of them, waiting, with wait=True)."""
+        """Rename the files whose compaction has finished (all of them, waiting, with wait=True)."""
         still = []
-        for proc, path, tmp in self.running:
+        for proc, source, tmp, final in self.running:
             code = proc.wait() if wait else proc.poll()
             if code is None:
-                still.append((proc, path, tmp))
+                still.append((proc, source, tmp, final))
             elif code == 0 and tmp.is_file() and tmp.stat().st_size > 0:
-                os.replace(tmp, path)
+                os.replace(tmp, final)
+                if source != final:
+                    source.unlink(missing_ok=True)
             else:
                 tmp.unlink(missing_ok=True)
+                if source != final:
+                    os.replace(source, final)
         self.running = still
+
+    def stop(self) -> None:
+        """End the compactions still running (the tool is ending); their sources are renamed uncompacted."""
+        for proc, *_ in self.running:
+            if proc.poll() is None:
+                proc.kill()
+        self.poll(wait=True)
 
 
 class Recorder:
@@ -156,7 +176,7 @@ class Recorder:
             if segment_s:
                 self._layout = self._rrd.with_name(f"{self._rrd.stem}.rbl")
                 self._stored_blueprint().save(APP_ID, self._layout)
-        self._open(self._segment_path(0) if segment_s else self._rrd)
+        self._open(self._writing_path(0) if segment_s else self._rrd)
 
     def _stored_blueprint(self) -> rrb.Blueprint:
         """The layout a file opens with."""
@@ -164,8 +184,18 @@ class Recorder:
                 else analysis_blueprint(self.rig, self.truth is not None))
 
     def _segment_path(self, index: int) -> Path | None:
-        """File of the index-th segment."""
+        """Final file of the index-th segment."""
         return None if self._rrd is None else self._rrd.with_name(f"{self._rrd.stem}-{index:03d}.rrd")
+
+    def _writing_path(self, index: int) -> Path | None:
+        """The file the index-th segment is written to: a temporary name, renamed when the segment is closed."""
+        final = self._segment_path(index)
+        if final is None:
+            return None
+        if final.exists():
+            raise InputError(final, "exists (an earlier session's recording; a recording is never overwritten): "
+                                    "expected another --rrd name", "--rrd")
+        return partial_path(final)
 
     def _open(self, path: Path | None) -> None:
         """Attach the sinks (a file and/or a viewer) and log everything static."""
@@ -204,10 +234,13 @@ class Recorder:
         if seg[1] is None or t - seg[1] < self._segment_s:
             return
         self.flush_estimates()
-        closed = self._segment_path(len(self._segments) - 1)
-        self._open(self._segment_path(len(self._segments)))
+        index = len(self._segments) - 1
+        closed = self._rrd.with_name(self._segments[index][0]) if self._rrd is not None else None
+        self._open(self._writing_path(len(self._segments)))
         if closed is not None:
-            self._compactor.start(closed, self._layout if len(self._segments) > 2 else None)
+            final = self._segment_path(index)
+            self._compactor.start(closed, self._layout if len(self._segments) > 2 else None, final)
+            self._segments[index][0] = final.name  # the index names it as it will be once renamed
         if self._last_update is not None:  # every segment opens with the superintendent's figures
             self._log_board(self._last_update)
         for camera, frames in self._gop.items():  # the frames a decoder needs before the next keyframe
@@ -221,10 +254,11 @@ class Recorder:
         """<stem>.segments.csv: every segment's file and capture-time span."""
         if self._rrd is None or not self._segment_s:
             return
-        with open(self._rrd.with_name(f"{self._rrd.stem}.segments.csv"), "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["file", "start", "end"])
-            w.writerows(self._segments)
+        text = io.StringIO()
+        w = csv.writer(text)
+        w.writerow(["file", "start", "end"])
+        w.writerows(self._segments)
+        write_text(self._rrd.with_name(f"{self._rrd.stem}.segments.csv"), text.getvalue())
 
     def _note_time(self, t: float) -> None:
         """Extend the current segment's span."""
@@ -364,14 +398,23 @@ class Recorder:
         self.status.log_if_due(self.rec, self._last_time, force=True)
         if self._last_update is not None:
             self._log_board(self._last_update)
-        self._write_index()
         try:
             self.rec.flush(timeout_sec=CLOSE_TIMEOUT_S if self._viewer else 1e38)
         except RuntimeError:  # only a live viewer that is gone can time out; the file sink has taken everything
             print(f"warning: the live viewer at {self._viewer} did not take the last data; the recording is "
                   "complete", file=sys.stderr)
         self.rec.disconnect()
-        last = self._segment_path(len(self._segments) - 1) if self._segment_s else self._rrd
-        if last is not None and last.is_file():
-            self._compactor.start(last, self._layout if len(self._segments) > 1 else None)
-        self._compactor.poll(wait=True)
+        if self._rrd is None:
+            return
+        if self._segment_s:
+            index = len(self._segments) - 1
+            last = self._rrd.with_name(self._segments[index][0])
+            self._compactor.start(last, self._layout if len(self._segments) > 1 else None, self._segment_path(index))
+            self._segments[index][0] = self._segment_path(index).name
+        else:
+            self._compactor.start(self._rrd)
+        try:
+            self._compactor.poll(wait=True)
+        except KeyboardInterrupt:  # a second Ctrl-C: files renamed as they are
+            self._compactor.stop()
+        self._write_index()

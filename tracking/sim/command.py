@@ -11,6 +11,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from tracking.camera import CameraModel, save_camera
 from tracking.errors import InputError
+from tracking.outputs import check_writable, discard, partial_dir, replace_dir
 from tracking.rig import CameraEntry, save_rig
 from tracking.sim.motion import CranePath
 from tracking.sim.render import CameraRenderer
@@ -20,6 +21,7 @@ from tracking.sim.video import TIME_BASE, VideoWriter, pts_of
 from tracking.sim.world import World
 
 MAX_START_OFFSET = 0.5  # s: cameras start up to this late on the common clock
+SCENARIO_FILE = "scenario.yaml"  # written last: a folder holding it is a finished simulation's
 
 
 @dataclass(frozen=True)
@@ -65,23 +67,47 @@ def _progress() -> Progress:
                     TextColumn("{task.fields[fps]:.1f} frames/s"), TimeRemainingColumn())
 
 
+def check_out_folder(out: Path, scenario: str) -> None:
+    """A one-line error unless out is new, empty, or an earlier simulation's folder that holds no input of this run."""
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "is a file (expected a folder to write the simulation into)", "--out")
+    if out.is_dir() and any(out.iterdir()) and not (out / SCENARIO_FILE).is_file():
+        raise InputError(out, f"holds other files (expected a new or empty folder, or an earlier simulation's, "
+                              f"which has {SCENARIO_FILE})", "--out")
+    source = Path(scenario)
+    if source.is_file() and out.is_dir() and source.resolve().is_relative_to(out.resolve()):
+        raise InputError(out, f"holds the scenario {source} that this run reads (expected another folder)", "--out")
+    check_writable(out, "--out")
+
+
 def run_simulate(scenario: str, out: Path, seed: int | None = None, duration: float | None = None,
                  quiet: bool = False) -> dict[str, float]:
-    """Render a scenario (YAML file or built-in name) into out; returns timing figures."""
+    """Render a scenario (YAML file or built-in name) into out; returns timing figures.
+
+    Everything is written into a temporary folder beside out, which replaces out (new, empty, or an earlier
+    simulation's) only once complete: a failure or Ctrl-C leaves out as it was."""
     sc = load_scenario(scenario)
     if seed is not None:
         sc = sc.model_copy(update={"seed": seed})
     if duration is not None and duration <= 0:
         raise InputError("--duration", f"must be positive, got {duration}")
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    if sc.calibration is not None:
-        from tracking.sim.calibration_shots import write_calibration_shots
+    check_out_folder(out, scenario)
+    partial = partial_dir(out)
+    try:
+        if sc.calibration is not None:
+            from tracking.sim.calibration_shots import write_calibration_shots
 
-        write_calibration_shots(sc, out, quiet=quiet)
-        (out / "scenario.yaml").write_text(dump_scenario(sc))
-        return {}
-    return render_scenario(sc, out, effective_duration(sc, duration), quiet=quiet)
+            write_calibration_shots(sc, partial, quiet=quiet)
+            (partial / SCENARIO_FILE).write_text(dump_scenario(sc))
+            figures: dict[str, float] = {}
+        else:
+            figures = render_scenario(sc, partial, effective_duration(sc, duration), quiet=quiet)
+    except BaseException:
+        discard(partial)
+        raise
+    replace_dir(partial, out)
+    return figures
 
 
 def render_scenario(sc: Scenario, out: Path, duration: float, quiet: bool = False) -> dict[str, float]:
@@ -126,5 +152,5 @@ def render_scenario(sc: Scenario, out: Path, duration: float, quiet: bool = Fals
     times = np.arange(0.0, duration + 1e-9, 1.0 / sc.truth_rate)
     truth_table(world, times).to_csv(out / "truth.csv", index=False, float_format="%.6f")
     write_frames(out / "truth_frames.csv", rows)
-    (out / "scenario.yaml").write_text(dump_scenario(sc))
+    (out / SCENARIO_FILE).write_text(dump_scenario(sc))
     return {"frames": float(total), "render_s": render_s, "encode_s": encode_s}
