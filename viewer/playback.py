@@ -1,14 +1,21 @@
-"""Opening recordings in Rerun's viewer (the `rerun` binary that ships with rerun-sdk)."""
+"""Opening recordings in Rerun's viewer (the `rerun` binary that ships with rerun-sdk), and stopping it again."""
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
+import tempfile
+import threading
 import time
+import urllib.parse
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -16,21 +23,47 @@ import numpy as np
 from tracking.errors import InputError
 
 SPLIT_UNITS = {"ns": 1e-9, "us": 1e-6, "µs": 1e-6, "ms": 1e-3, "s": 1.0}
-LOOPBACK = {"127.0.0.1", "localhost", "::1"}
+GRPC_PORT = 9876
+WEB_PORT = 9090
+VIEWER_MEMORY_LIMIT = "2GB"  # a six-hour session: the viewer drops the oldest data beyond this, the file keeps all
+# Rerun's analytics pipeline (re_analytics, native/pipeline.rs) starts nothing when CI is set ("Analytics disabled on
+# CI"); FORCE_RERUN_ANALYTICS would override that, so it is dropped. The user's own analytics.json is left alone.
+ANALYTICS_OFF = {"CI": "1"}
+ANALYTICS_FORCE_VAR = "FORCE_RERUN_ANALYTICS"
+RRD_MAGIC = b"RRF"  # every .rrd starts with a FourCC, RRF2 in the files Rerun 0.41 writes
+STOP_TIMEOUT_S = 5.0  # SIGTERM, then SIGKILL for whatever of the viewer's process group is still there
+READY_TIMEOUT_S = 60.0  # the web server answers within a second; a loaded machine gets a margin
+POLL_S = 0.05
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+VIEW_TMP_PREFIX = "topside-view-"
+ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
 def rerun_binary() -> str:
-    """Path of the `rerun` command installed with rerun-sdk."""
+    """Path of the `rerun` executable installed with rerun-sdk (the real one, not its Python wrapper script)."""
+    if os.environ.get("RERUN_CLI_PATH"):  # the override the wrapper honours
+        return os.environ["RERUN_CLI_PATH"]
+    try:
+        import rerun_cli
+
+        bundled = Path(rerun_cli.__file__).parent
+        for exe in (bundled / "Rerun.app" / "Contents" / "MacOS" / "Rerun", bundled / "rerun",
+                    bundled / "rerun.exe"):
+            if exe.is_file():
+                return str(exe)
+    except ImportError:
+        pass
     local = Path(sys.executable).parent / "rerun"
     return str(local) if local.exists() else (shutil.which("rerun") or "rerun")
 
 
-def viewer_env() -> dict[str, str]:
-    """Environment for Rerun's native viewer: an `ffmpeg` on PATH, which it needs to decode H.264 video streams.
+def rerun_env() -> dict[str, str]:
+    """Environment for every `rerun` process the tool starts: analytics off, and an `ffmpeg` on PATH.
 
-    The one shipped with imageio-ffmpeg is linked as `ffmpeg` into the venv's bin when the system has none.
+    The viewer needs ffmpeg to decode H.264 video streams; the one shipped with imageio-ffmpeg is linked as `ffmpeg`
+    into the venv's bin when the system has none.
     """
-    env = dict(os.environ)
+    env = {k: v for k, v in os.environ.items() if k != ANALYTICS_FORCE_VAR} | ANALYTICS_OFF
     if shutil.which("ffmpeg"):
         return env
     import imageio_ffmpeg
@@ -45,68 +78,297 @@ def viewer_env() -> dict[str, str]:
     return env
 
 
+viewer_env = rerun_env  # its former name, still imported elsewhere
+
+
 def has_display() -> bool:
     """True when a native window can open."""
     return sys.platform in ("darwin", "win32") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-def viewer_command(recording: Path, web: bool = False, bind: str = "127.0.0.1") -> list[str]:
-    """The rerun command line that opens a recording."""
-    cmd = [rerun_binary(), str(recording)]
+def resolve_bind(bind: str) -> str:
+    """The numeric address --bind names (an address or a host name), checked to be one of this machine's."""
+    try:
+        infos = socket.getaddrinfo(bind, None, type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        reason = exc.strerror if isinstance(exc, socket.gaierror) else "not a host name"
+        raise InputError("--bind", f"{bind!r} does not resolve ({reason}); expected an address or host name of "
+                                   "this machine") from None
+    candidates = sorted({(family, sockaddr[0]) for family, _, _, _, sockaddr in infos},
+                        key=lambda c: (c[0] != socket.AF_INET, c[1]))  # IPv4 first: what a tablet reaches
+    for family, address in candidates:
+        try:
+            with socket.socket(family, socket.SOCK_STREAM) as probe:
+                probe.bind((address, 0))
+        except OSError:
+            continue
+        return address
+    found = ", ".join(a for _, a in candidates)
+    named = repr(bind) if found == bind else f"{bind!r} ({found})"
+    raise InputError("--bind", f"{named} is not an address of this machine; expected one of its own, or 127.0.0.1")
+
+
+def is_loopback(address: str) -> bool:
+    """True for an address only this machine reaches."""
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return address == "localhost"
+
+
+def warn_if_exposed(address: str) -> None:
+    """One line on stderr when a viewer listens beyond this machine."""
+    if not is_loopback(address):
+        print(f"warning: the viewer is exposed on {address}; anyone on that network can see the installation",
+              file=sys.stderr)
+
+
+def url_host(address: str) -> str:
+    """How a URL names the machine at a bound address (a wildcard address: by its host name)."""
+    ip = ipaddress.ip_address(address)
+    if ip.is_unspecified:
+        return socket.gethostname()
+    return f"[{address}]" if ip.version == 6 else address
+
+
+def connect_host(address: str) -> str:
+    """Where a process on this machine reaches a server bound to the address."""
+    ip = ipaddress.ip_address(address)
+    if ip.is_unspecified:
+        return "127.0.0.1" if ip.version == 4 else "[::1]"
+    return f"[{address}]" if ip.version == 6 else address
+
+
+def grpc_url(host: str, grpc_port: int) -> str:
+    """The gRPC URL of a Rerun server (the proxy SDKs log to and viewers read from)."""
+    return f"rerun+http://{host}:{grpc_port}/proxy"
+
+
+def web_viewer_url(address: str, grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT) -> str:
+    """The page to open in a browser: the web viewer, told where its data is (the query quoted: '+' is a space)."""
+    host = url_host(address)
+    return f"http://{host}:{web_port}/?url={urllib.parse.quote(grpc_url(host, grpc_port), safe='')}"
+
+
+def check_port_free(address: str, port: int, option: str) -> None:
+    """A one-line error when something on this machine already listens on the port."""
+    family = socket.AF_INET6 if ipaddress.ip_address(address).version == 6 else socket.AF_INET
+    try:
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as servers do: TIME_WAIT is no obstacle
+            probe.bind((address, port))
+    except OSError as exc:
+        raise InputError(option, f"cannot listen on {address} port {port} ({exc.strerror}); expected a free "
+                                 "port") from None
+
+
+def check_recording(path: Path) -> None:
+    """A one-line error unless the file is a complete Rerun recording (`rerun rrd verify`: ~1 GB/s, cached)."""
+    if not path.is_file():
+        raise InputError(path, "recording not found (expected a .rrd file)")
+    with path.open("rb") as f:
+        head = f.read(len(RRD_MAGIC) + 1)
+    if not head:
+        raise InputError(path, "is empty (expected a Rerun recording, .rrd)")
+    if not head.startswith(RRD_MAGIC):
+        raise InputError(path, f"is not a Rerun recording (it starts with {head!r}; a .rrd starts with RRF)")
+    proc = subprocess.run([rerun_binary(), "rrd", "verify", str(path)], capture_output=True, text=True,
+                          errors="replace", check=False, env=rerun_env())
+    lines = [ANSI.sub("", line).strip() for line in (proc.stderr + proc.stdout).splitlines() if line.strip()]
+    if proc.returncode == 0 and any(line.startswith("1 file verified") for line in lines):
+        return
+    problems = [re.sub(r'^"[^"]*"\S*: ', "", line) for line in lines if not line.startswith("Error: Verification")]
+    reason = problems[0] if problems else f"rerun rrd verify exited with status {proc.returncode}"
+    if "footer" in reason.lower():
+        raise InputError(path, f"is incomplete ({reason}): still being written, or cut short; "
+                               f"`rerun rrd merge {path} -o <new>.rrd` recovers what it holds")
+    if proc.returncode == 0:  # verify read no message at all: a bare header
+        reason = "no data"
+    raise InputError(path, f"is not a readable Rerun recording ({reason})")
+
+
+def viewer_command(recording: Path, web: bool = False, address: str = "127.0.0.1", grpc_port: int | None = None,
+                   web_port: int = WEB_PORT) -> list[str]:
+    """The rerun command line that opens a recording; its servers listen on the address only."""
     if web:
-        cmd += ["--web-viewer", "--bind", bind]
-    return cmd
+        return [rerun_binary(), "--serve-web", str(recording), "--bind", address,
+                "--port", str(GRPC_PORT if grpc_port is None else grpc_port), "--web-viewer-port", str(web_port)]
+    # the native viewer hosts a gRPC server too; "auto": a free port, not a viewer already running on the default
+    port = "auto" if grpc_port is None else str(grpc_port)
+    return [rerun_binary(), str(recording), "--bind", address, "--port", port]
 
 
-def open_viewer(recording: Path, web: bool = False, bind: str = "127.0.0.1") -> None:
-    """Open the recording; a one-line error when it is missing or no display is available for the native viewer."""
-    if not recording.is_file():
-        raise InputError(recording, "recording not found (expected a .rrd file)")
+def live_viewer_command(web: bool, address: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT
+                        ) -> list[str]:
+    """The rerun command line of a viewer that a live session streams to; its servers listen on the address only."""
+    if web:
+        return [rerun_binary(), "--serve-web", "--bind", address, "--port", str(grpc_port),
+                "--web-viewer-port", str(web_port), "--server-memory-limit", VIEWER_MEMORY_LIMIT]
+    return [rerun_binary(), "--bind", address, "--port", str(grpc_port), "--memory-limit", VIEWER_MEMORY_LIMIT,
+            "--expect-data-soon"]
+
+
+class StopSignals:
+    """In the block, SIGINT, SIGTERM and SIGHUP raise KeyboardInterrupt as Ctrl-C does; old handlers come back after.
+
+    Only the first counts: later ones are ignored, so the cleanup it starts (bounded by timeouts) runs to its end.
+    Inside deferred(), the interrupt waits for the block's end: a process being started is known before it comes.
+    """
+
+    def __init__(self) -> None:
+        self.previous: dict[int, object] = {}
+        self.deferring = False
+        self.pending = False
+
+    def __enter__(self) -> StopSignals:
+        if threading.current_thread() is threading.main_thread():  # only the main thread may set handlers
+            self.previous = {s: signal.signal(s, self._interrupt) for s in STOP_SIGNALS}
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for s, handler in self.previous.items():
+            signal.signal(s, handler)
+
+    def _interrupt(self, signum: int, frame: object) -> None:
+        """The handler: ignore what follows, then interrupt (now, or at the end of deferred())."""
+        for s in STOP_SIGNALS:
+            signal.signal(s, signal.SIG_IGN)
+        if self.deferring:
+            self.pending = True
+            return
+        raise KeyboardInterrupt
+
+    @contextmanager
+    def deferred(self) -> Iterator[None]:
+        """A signal received in this block interrupts at its end."""
+        self.deferring = True
+        try:
+            yield
+        finally:
+            self.deferring = False
+            if self.pending:
+                raise KeyboardInterrupt
+
+
+def start_viewer_process(cmd: list[str], log: Path | None = None, tmp: Path | None = None) -> subprocess.Popen:
+    """Start a rerun process in its own process group (stopped with everything it starts).
+
+    log: where its output goes (default: the terminal); tmp: its TMPDIR (the native viewer leaves rerun-data-* there).
+    """
+    env = rerun_env()
+    if tmp is not None:
+        tmp.mkdir(parents=True, exist_ok=True)
+        env["TMPDIR"] = str(tmp)
+    out = log.open("wb") if log is not None else None
+    try:
+        return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT if out else None,
+                                env=env, start_new_session=True)  # own group: a terminal's Ctrl-C is ours to pass on
+    finally:
+        if out is not None:
+            out.close()
+
+
+def last_words(log: Path | None) -> str:
+    """": " and the last line a viewer wrote to its log, without colours; "" when there is none."""
+    if log is None or not log.is_file():
+        return ""
+    lines = [ANSI.sub("", line).strip() for line in log.read_text(errors="replace").splitlines() if line.strip()]
+    return f": {lines[-1]}" if lines else ""
+
+
+def wait_listening(process: subprocess.Popen, address: str, port: int, log: Path | None,
+                   timeout: float = READY_TIMEOUT_S) -> None:
+    """Wait until the server answers on the port; SystemExit with its last words when it ends or never answers."""
+    host = connect_host(address).strip("[]")
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            raise SystemExit(f"topside: the viewer stopped before serving (status {process.returncode})"
+                             f"{last_words(log)}")
+        try:
+            with socket.create_connection((host, port), timeout=1.0):
+                return
+        except OSError:
+            time.sleep(POLL_S)
+    raise SystemExit(f"topside: the viewer did not answer on {host}:{port} within {timeout:.0f} s{last_words(log)}")
+
+
+def run_viewer(recording: Path, web: bool, address: str, grpc_port: int | None, web_port: int, work: Path,
+               signals: StopSignals) -> None:
+    """Run the viewer on a checked recording until it ends (window closed) or a signal stops it; stopped either way."""
+    log = work / "rerun.log" if web else None  # the native viewer talks to its terminal as it always did
+    process = None
+    try:
+        with signals.deferred():
+            process = start_viewer_process(viewer_command(recording, web, address, grpc_port, web_port), log,
+                                           work / "tmp")  # Rerun's own temporary files go with ours
+        if web:
+            wait_listening(process, address, web_port, log)
+            print(web_viewer_url(address, GRPC_PORT if grpc_port is None else grpc_port, web_port), flush=True)
+            print("serving the web viewer; Ctrl-C stops it", file=sys.stderr, flush=True)
+        code = process.wait()
+        if web or code != 0:
+            raise SystemExit(f"topside: the viewer stopped by itself (status {code}){last_words(log)}")
+    finally:
+        if process is not None:
+            stop_viewer(process)
+
+
+def view_recording(recording: Path, start: float | None = None, end: float | None = None, web: bool = False,
+                   bind: str = "127.0.0.1", grpc_port: int | None = None, web_port: int = WEB_PORT) -> None:
+    """Open a recording (or a window of it) in Rerun's viewer, until it is closed or Ctrl-C/SIGTERM/SIGHUP.
+
+    Refuses unreadable recordings and unusable addresses before starting anything; however it ends, the viewer's
+    process group is stopped and the temporary files (a window cut from the recording, the server's log) removed.
+    """
+    address = resolve_bind(bind)
     if not web and not has_display():
         raise InputError(recording, "no display for the native viewer (use --web, or open the file on a desktop)")
+    grpc = GRPC_PORT if web and grpc_port is None else grpc_port  # the native viewer's own default: a free one
     if web:
-        warn_if_exposed(bind)
-    subprocess.run(viewer_command(recording, web, bind), check=False, env=viewer_env())
-
-
-GRPC_PORT = 9876
-WEB_PORT = 9090
-VIEWER_MEMORY_LIMIT = "2GB"  # a six-hour session: the viewer drops the oldest data beyond this, the file keeps all
-
-
-def warn_if_exposed(bind: str) -> None:
-    """One line on stderr when a viewer listens beyond this machine."""
-    if bind not in LOOPBACK:
-        print(f"warning: the viewer is exposed on {bind}; anyone on that network can see the installation",
-              file=sys.stderr)
+        check_port_free(address, web_port, "--web-port")
+    if grpc is not None:  # taken by another viewer, Rerun would hand it the recording instead
+        check_port_free(address, grpc, "--grpc-port")
+    warn_if_exposed(address)
+    with StopSignals() as signals, tempfile.TemporaryDirectory(prefix=VIEW_TMP_PREFIX) as work:
+        opened = window_recording(recording, start, end, Path(work) / "window")
+        run_viewer(opened, web, address, grpc_port, web_port, Path(work), signals)
 
 
 def start_live_viewer(web: bool, bind: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT
                       ) -> tuple[str, subprocess.Popen]:
-    """Start a viewer that a live session streams to: (its gRPC URL, the process)."""
+    """Start a viewer that a live session streams to: (its gRPC URL, the process), listening on --bind only."""
     if not web and not has_display():
         raise InputError("--spawn", "no display for the native viewer (use --web for a browser or tablet)")
-    cmd = [rerun_binary(), "--port", str(grpc_port), "--memory-limit", VIEWER_MEMORY_LIMIT, "--expect-data-soon"]
-    if web:
-        warn_if_exposed(bind)
-        cmd = [rerun_binary(), "--serve-web", "--bind", bind, "--port", str(grpc_port),
-               "--web-viewer-port", str(web_port), "--server-memory-limit", VIEWER_MEMORY_LIMIT]
-    process = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=viewer_env(),
-                               start_new_session=True)  # its own group: `rerun` is a wrapper around the server
-    return f"rerun+http://127.0.0.1:{grpc_port}/proxy", process
+    address = resolve_bind(bind)
+    warn_if_exposed(address)
+    process = subprocess.Popen(live_viewer_command(web, address, grpc_port, web_port), stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL, env=rerun_env(), start_new_session=True)
+    return grpc_url(connect_host(address), grpc_port), process
 
 
-def stop_viewer(process: subprocess.Popen, timeout: float = 10.0) -> None:
-    """Stop a live viewer and the server its `rerun` wrapper started (terminating the wrapper alone leaves it)."""
+def _group_alive(process: subprocess.Popen) -> bool:
+    """True while any process of the viewer's group (its leader reaped as it exits) is still there."""
+    process.poll()
+    try:
+        os.killpg(process.pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # a member we may not signal still exists
+        return True
+    return True
+
+
+def stop_viewer(process: subprocess.Popen, timeout: float = STOP_TIMEOUT_S) -> None:
+    """Stop a viewer and its whole process group: SIGTERM, then SIGKILL for whatever is left after the timeout."""
     try:
         os.killpg(process.pid, signal.SIGTERM)
     except ProcessLookupError:
+        process.wait()
         return
-    try:
-        process.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        pass
-    time.sleep(0.5)  # the wrapper exits first; the server gets a moment to close, then whatever is left is killed
+    deadline = time.monotonic() + timeout
+    while _group_alive(process) and time.monotonic() < deadline:
+        time.sleep(POLL_S)
     try:
         os.killpg(process.pid, signal.SIGKILL)
     except ProcessLookupError:
@@ -142,8 +404,7 @@ def window_recording(recording: Path, start: float | None, end: float | None, wo
     if not files:
         raise InputError(index, f"has no segment between {start} and {end} s", "--from/--to")
     for f in files:
-        if not f.is_file():
-            raise InputError(f, "recording not found (expected a .rrd file)")
+        check_recording(f)  # before serving or cutting: an unreadable file would show as an empty viewer
     if start is None and end is None and len(files) == 1:
         return files[0]
     work.mkdir(parents=True, exist_ok=True)
@@ -172,7 +433,8 @@ def _part_start(name: str, stem: str) -> float:
 
 def _rerun(args: list[str], recording: Path) -> None:
     """Run a `rerun` subcommand; a one-line error when it fails."""
-    proc = subprocess.run([rerun_binary(), *args], capture_output=True, text=True, check=False)
+    proc = subprocess.run([rerun_binary(), *args], capture_output=True, text=True, errors="replace", check=False,
+                          env=rerun_env())
     if proc.returncode != 0:
-        last = (proc.stderr.strip().splitlines() or ["failed"])[-1]
+        last = ANSI.sub("", (proc.stderr.strip().splitlines() or ["failed"])[-1])
         raise InputError(recording, f"rerun {args[0]} {args[1]}: {last}")
