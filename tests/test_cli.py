@@ -175,3 +175,59 @@ def test_marker_not_in_rig_in_an_image(installation: Path, tmp_path: Path, share
 
 def test_missing_rig_file(tmp_path: Path) -> None:
     assert_one_line_error(run("track", "--rig", tmp_path / "nope.yaml"), "nope.yaml", "rig file not found")
+
+
+# --- outputs: complete under their names, never half-written, nothing recorded lost ------------------------------
+
+def test_live_stopped_by_sigterm_keeps_every_row_under_its_name(installation: Path, tmp_path: Path) -> None:
+    import signal
+    import time
+
+    out, rrd = tmp_path / "live.csv", tmp_path / "live.rrd"
+    proc = subprocess.Popen([*TOPSIDE, "live", "--rig", str(installation / "rig.yaml"), "--rrd", str(rrd), "-o",
+                             str(out), "--speed", "0.1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        while "live:" not in (line := proc.stdout.readline()):
+            assert line, proc.stderr.read()
+        time.sleep(3.0)  # 0.8 s of video replayed at a tenth of real time: stopped in the middle
+        proc.send_signal(signal.SIGTERM)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, stderr
+    rows = len(pd.read_csv(out))
+    assert 0 < rows < 2 * FRAMES  # some, not all
+    assert f"wrote {rows} rows to {out}" in stdout
+    assert not list(tmp_path.glob("*.partial*"))  # everything renamed to its final name
+    index = pd.read_csv(tmp_path / "live.segments.csv")
+    assert all((tmp_path / f).is_file() for f in index["file"])
+
+
+def test_live_never_overwrites_an_earlier_session(installation: Path, tmp_path: Path) -> None:
+    (tmp_path / "live-000.rrd").write_bytes(b"an earlier session")
+    proc = run("live", "--rig", installation / "rig.yaml", "--rrd", tmp_path / "live.rrd", "-o", tmp_path / "n.csv",
+               "--speed", "inf")
+    assert_one_line_error(proc, "live-000.rrd", "never overwrites")
+    assert (tmp_path / "live-000.rrd").read_bytes() == b"an earlier session"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["live-000.rrd"]
+
+
+def test_simulate_replaces_its_own_earlier_folder(tmp_path: Path) -> None:
+    out = tmp_path / "sim"
+    for seed in ("1", "2"):
+        proc = run("simulate", "config1-procedure1-clear", "-o", out, "--duration", "0.2", "--seed", seed)
+        assert proc.returncode == 0, proc.stderr
+    assert yaml.safe_load((out / "scenario.yaml").read_text())["seed"] == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sim"]  # no temporary folder left
+
+
+def test_recover_an_intact_archive_writes_nothing(installation: Path, tmp_path: Path) -> None:
+    archive = tmp_path / "run.mcap"
+    proc = run("track", "--rig", installation / "rig.yaml", "-o", tmp_path / "o.csv", "--mcap", archive)
+    assert proc.returncode == 0, proc.stderr
+    before = archive.read_bytes()
+    proc = run("verify", archive, "--recover")
+    assert proc.returncode == 0, proc.stderr
+    assert "nothing to recover" in proc.stdout and ": OK;" in proc.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.csv", "run.mcap"]
+    assert archive.read_bytes() == before

@@ -39,8 +39,8 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     add_completion=False,
 )
-err_console = Console(stderr=True, highlight=False, soft_wrap=True)
-console = Console(highlight=False)
+err_console = Console(stderr=True, highlight=False, soft_wrap=True, markup=False)  # file names are never markup
+console = Console(highlight=False, soft_wrap=True, markup=False)
 
 
 # Options shared by `track --mcap` and `export`.
@@ -142,10 +142,10 @@ def calibrate(
     for name, value in values.items():
         console.print(f"  {name:>3} = {value:12.6f} ± {std.get(name, float('nan')):.6f}")
     if result.missed:
-        console.print(f"[yellow]no board found in {len(result.missed)}: {', '.join(result.missed)}[/yellow]")
+        console.print(f"no board found in {len(result.missed)}: {', '.join(result.missed)}", style="yellow")
     if result.coverage < calib.COVERAGE_WARN:
-        console.print(f"[yellow]warning: the board covered only {result.coverage:.0%} of the image "
-                      "(corners and edges unseen); distortion is poorly determined there[/yellow]")
+        console.print(f"warning: the board covered only {result.coverage:.0%} of the image "
+                      "(corners and edges unseen); distortion is poorly determined there", style="yellow")
     save_camera(out, result.camera, extra={"nframes": len(result.per_view_rms), "flags": result.flags})
     console.print(f"wrote {out}")
 
@@ -335,7 +335,7 @@ def _print_track_summary(rig: Rig, rig_path: Path, mode: str, stats: TrackStats)
     console.print(table)
     if stats.unknown_ids:
         summary = ", ".join(f"id {i}: {n}" for i, n in sorted(stats.unknown_ids.items()))
-        console.print(f"[yellow]markers not in the rig (ignored): {summary}[/yellow]")
+        console.print(f"markers not in the rig (ignored): {summary}", style="yellow")
 
 
 def _archive_sink(rig: Rig, path: Path, options: dict[str, str], truth_df: pd.DataFrame | None,
@@ -404,8 +404,8 @@ def verify(
                           f"{time_text(r.last_ns) if r.last_ns is not None else '-'}; {r.chunks_damaged} damaged "
                           f"chunks and {r.bytes_dropped} trailing bytes dropped", soft_wrap=True)
             if r.manifest_was_missing:
-                console.print("[yellow]the manifest was missing (the writer did not close); the recovered file "
-                              "carries its own, marked 'recovered'[/yellow]", soft_wrap=True)
+                console.print("the manifest was missing (the writer did not close); the recovered file carries its "
+                              "own, marked 'recovered'", style="yellow")
             console.print(f"wrote {target}")
             archive = target
     report = verify_file(archive, public)
@@ -431,17 +431,22 @@ def view(
     start: Annotated[float | None, typer.Option("--from", help="Open from this capture time, s.")] = None,
     end: Annotated[float | None, typer.Option("--to", help="Open up to this capture time, s.")] = None,
     web: Annotated[bool, typer.Option("--web", help="Serve the web viewer instead of opening the native one.")] = False,
-    bind: Annotated[str, typer.Option(help="Address the web viewer listens on.")] = "127.0.0.1",
+    bind: Annotated[str, typer.Option(help="Address (or host name) of this machine the viewer's servers listen on.")
+                    ] = "127.0.0.1",
+    web_port: Annotated[int, typer.Option(help="Port of the web viewer's page (with --web).", min=1, max=65535)
+                        ] = 9090,
+    grpc_port: Annotated[int | None, typer.Option(help="Port of the viewer's gRPC server (default: 9876 with --web, "
+                                                       "a free one for the native viewer).", min=1, max=65535)] = None,
 ) -> None:
-    """Open a recording in Rerun's viewer (native, or web with --web); --from/--to open a window of it."""
-    import tempfile
+    """Open a recording in Rerun's viewer (native, or web with --web); --from/--to open a window of it.
 
-    from viewer.playback import open_viewer, window_recording
+    With --web, prints the URL to open; Ctrl-C (or SIGTERM) stops the server and removes its temporary files.
+    """
+    from viewer.playback import view_recording
 
     if start is not None and end is not None and end <= start:
         raise InputError("--to", f"{end} is not after --from {start}")
-    with tempfile.TemporaryDirectory(prefix="topside-view-") as work:
-        open_viewer(window_recording(recording, start, end, Path(work)), web=web, bind=bind)
+    view_recording(recording, start, end, web=web, bind=bind, grpc_port=grpc_port, web_port=web_port)
 
 
 LIVE_SEGMENT_MIN = 1.0  # a minute a file: quick to open, and `topside view --from --to` picks the window
@@ -458,7 +463,8 @@ def live(
                                                                  "(default: beside the recording).")] = None,
     spawn: Annotated[bool, typer.Option("--spawn", help="Stream to a native viewer.")] = False,
     web: Annotated[bool, typer.Option("--web", help="Serve the web viewer (a tablet on the stern).")] = False,
-    bind: Annotated[str, typer.Option(help="Address the web viewer listens on.")] = "127.0.0.1",
+    bind: Annotated[str, typer.Option(help="Address (or host name) of this machine the viewer's servers listen on "
+                                           "(--web, --spawn).")] = "127.0.0.1",
     stale: Annotated[float, typer.Option(help="Seconds after which a cone shows NO DATA.",
                                          callback=_finite(0.0))] = 0.5,
     segment_minutes: Annotated[float, typer.Option(help="Minutes of capture time per recording file.",
@@ -476,7 +482,7 @@ def live(
     from tracking.live import LiveTracker
     from tracking.report import OffsetsWriter
     from tracking.rig import load_rig
-    from viewer.playback import start_live_viewer, stop_viewer
+    from viewer.playback import resolve_bind, start_live_viewer, stop_viewer, web_viewer_url
     from viewer.session import Recorder
 
     if spawn and web:
@@ -488,13 +494,14 @@ def live(
     rrd = rrd or Path("recordings") / f"live-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
     out = out or rrd.with_name(f"{rrd.stem}-offsets.csv")
     check_outputs({"--out": out, "--rrd": rrd}, rig_inputs(the_rig))
-    for path, option in ((out, "--out"), (rrd.with_name(f"{rrd.stem}.segments.csv"), "--rrd")):
+    for path, option in ((out, "--out"), (rrd.with_name(f"{rrd.stem}.segments.csv"), "--rrd"),
+                         (rrd.with_name(f"{rrd.stem}-000.rrd"), "--rrd")):
         if path.exists():
             raise InputError(path, "exists (an earlier session's record; a live session never overwrites one): "
                                    "expected another name", option)
     viewer_url, viewer_process = start_live_viewer(web, bind) if (spawn or web) else (None, None)
     if web:
-        console.print(f"web viewer: http://{bind}:9090/?url={viewer_url}")
+        console.print(f"web viewer: {web_viewer_url(resolve_bind(bind))}")
     outputs = Outputs()  # every end (done, Ctrl-C, SIGTERM, a failure) keeps what was recorded, under its name
     writer: OffsetsWriter | None = None
     recorder: Recorder | None = None
@@ -529,7 +536,7 @@ def live(
                 recorder.close()
         finally:
             outputs.commit()  # what was measured is the record of the lift, however the session ended
-            if viewer_process is not None and not spawn:
+            if viewer_process is not None:  # the viewers the tool starts end with it
                 stop_viewer(viewer_process)
     console.print(f"wrote {writer.rows if writer else 0} rows to {out}; recording {rrd.with_name(rrd.stem + '-*.rrd')}")
 
@@ -538,8 +545,9 @@ def live(
 def simulate(
     scenario: Annotated[str, typer.Argument(help="Scenario YAML file or built-in name (e.g. config2-procedure5).")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Output folder for videos, rig, calibration, truth.")],
-    seed: Annotated[int | None, typer.Option(help="Random seed (default: the scenario's).")] = None,
-    duration: Annotated[float | None, typer.Option(help="Cut the scenario to this many seconds.")] = None,
+    seed: Annotated[int | None, typer.Option(help="Random seed (default: the scenario's).", min=0)] = None,
+    duration: Annotated[float | None, typer.Option(help="Cut the scenario to this many seconds.",
+                                                   callback=_finite(0.0))] = None,
 ) -> None:
     """Render a scenario: one video per camera, the rig, calibration files and the ground-truth log.
 
@@ -561,11 +569,24 @@ def evaluate(
     """The paper's accuracy table (e_MAE, |e|max, σ_e, μ_e per axis), RMSE, lag and availability against truth."""
     from rich.table import Table
 
-    from tracking.evaluate import evaluate_runs, evaluation_markdown, plot_run, read_offsets, read_truth
+    from tracking.evaluate import (
+        check_overlap,
+        evaluate_runs,
+        evaluation_markdown,
+        plot_run,
+        read_offsets,
+        read_truth,
+    )
+    from tracking.outputs import write_text
 
     if len(runs) % 2:
         raise InputError(runs[-1], "has no truth file after it (expected OFFSETS.csv TRUTH.csv pairs)")
+    check_outputs({"--markdown": markdown}, runs)
+    if plots is not None and plots.exists() and not plots.is_dir():
+        raise InputError(plots, "is a file (expected a folder for the plots)", "--plots")
     pairs = [(read_offsets(runs[i]), read_truth(runs[i + 1])) for i in range(0, len(runs), 2)]
+    for i, (off, tru) in enumerate(pairs):
+        check_overlap(runs[2 * i], off, runs[2 * i + 1], tru)
     label = name or ", ".join(str(runs[i].name) for i in range(0, len(runs), 2))
     ev = evaluate_runs(label, pairs)
     table = Table(title=f"{label} against the truth (m)")
@@ -578,7 +599,7 @@ def evaluate(
     console.print(f"lag {ev.lag_s:.2f} s (cross-correlation) · availability {ev.availability:.1%} "
                   f"(share of time with an estimate at most 0.5 s old)")
     if markdown:
-        markdown.write_text(evaluation_markdown(ev))
+        write_text(markdown, evaluation_markdown(ev))
     if plots:
         for i, (off, tru) in enumerate(pairs):
             for path in plot_run(off, tru, plots, runs[2 * i].stem):
@@ -592,7 +613,8 @@ DEMO_DURATION_S = 20.0
 @app.command()
 def demo(
     out: Annotated[Path, typer.Option("-o", "--out", help="Folder for the demo's files.")] = Path("recordings"),
-    duration: Annotated[float, typer.Option(help="Seconds of the scenario to simulate.")] = DEMO_DURATION_S,
+    duration: Annotated[float, typer.Option(help="Seconds of the scenario to simulate.",
+                                            callback=_finite(0.0))] = DEMO_DURATION_S,
     no_viewer: Annotated[bool, typer.Option("--no-viewer", help="Do not open the viewer at the end.")] = False,
 ) -> None:
     """Simulate configuration 2, procedure 5 in fog and rain, track it (fused), record it, print its accuracy."""

@@ -29,8 +29,7 @@ from tracking.pipeline import FrameResult
 from tracking.rig import Rig
 from viewer.archive import ArchiveInputs
 from viewer.blueprint import LayoutSender, analysis_blueprint
-from viewer.playback import rerun_binary
-from viewer.playback import viewer_env as rerun_env  # TODO: rerun_env
+from viewer.playback import rerun_binary, rerun_env
 from viewer.recording import (
     APP_ID,
     FILTER_CAMERAS,

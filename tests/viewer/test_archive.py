@@ -23,7 +23,7 @@ from tests.viewer.conftest import Archived
 from tracking.camera import load_camera
 from viewer.audit import verify
 from viewer.manifest import load_public_key
-from viewer.playback import rerun_binary
+from viewer.playback import rerun_binary, rerun_env
 
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]
 CAMERAS = ("cam-ahead", "cam-port")
@@ -150,13 +150,14 @@ def test_export_from_the_recording_equals_the_tracked_archive(archived: Archived
 
 def test_rerun_checks_and_converts_the_archive(archived: Archived, tmp_path: Path) -> None:
     check = subprocess.run([rerun_binary(), "mcap", "check", str(archived.mcap)], capture_output=True, text=True,
-                           timeout=60)
+                           timeout=60, env=rerun_env())
     assert check.returncode == 0, check.stderr
     rows = [line.split() for line in check.stdout.splitlines() if line.strip().startswith(("ok", "warn", "error"))]
     assert len(rows) == 15 and all(r[0] == "ok" for r in rows), check.stdout
     rrd = tmp_path / "converted.rrd"
     conv = subprocess.run([rerun_binary(), "mcap", "convert", str(archived.mcap), "-o", str(rrd),
-                           "--timeline-type", "duration"], capture_output=True, text=True, timeout=60)
+                           "--timeline-type", "duration"], capture_output=True, text=True, timeout=60,
+                          env=rerun_env())
     assert conv.returncode == 0, conv.stderr
     columns: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
     for chunk in rr.chunk.RrdReader(rrd).store().stream().to_chunks():

@@ -15,7 +15,7 @@ import rerun as rr
 from tests.conftest import FRAMES, REPO
 from tests.synthetic import CONE_A
 from tests.viewer.conftest import Archived
-from viewer.playback import rerun_binary
+from viewer.playback import rerun_binary, rerun_env
 from viewer.readback import chunks_by_entity, component_rows
 
 
@@ -102,7 +102,8 @@ def test_truth_and_errors(recorded: tuple[Path, pd.DataFrame], installation: Pat
 def test_blueprint_stored_and_file_verifies(recorded: tuple[Path, pd.DataFrame]) -> None:
     rrd, _ = recorded
     assert len(rr.chunk.RrdReader(rrd).blueprints()) == 1
-    proc = subprocess.run([rerun_binary(), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=60)
+    proc = subprocess.run([rerun_binary(), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=60,
+                          env=rerun_env())
     assert proc.returncode == 0, proc.stderr
 
 
