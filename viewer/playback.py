@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import ipaddress
 import os
 import re
@@ -31,6 +32,7 @@ VIEWER_MEMORY_LIMIT = "2GB"  # a six-hour session: the viewer drops the oldest d
 ANALYTICS_OFF = {"CI": "1"}
 ANALYTICS_FORCE_VAR = "FORCE_RERUN_ANALYTICS"
 RRD_MAGIC = b"RRF"  # every .rrd starts with a FourCC, RRF2 in the files Rerun 0.41 writes
+PR_SET_PDEATHSIG = 1  # prctl option: the signal a child gets when its parent dies (linux/prctl.h)
 STOP_TIMEOUT_S = 5.0  # SIGTERM, then SIGKILL for whatever of the viewer's process group is still there
 READY_TIMEOUT_S = 60.0  # the web server answers within a second; a loaded machine gets a margin
 POLL_S = 0.05
@@ -250,6 +252,12 @@ class StopSignals:
                 raise KeyboardInterrupt
 
 
+def die_with_parent() -> None:
+    """In a child before it runs (Linux): SIGTERM it when topside ends, even killed with SIGKILL."""
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
 def start_viewer_process(cmd: list[str], log: Path | None = None, tmp: Path | None = None) -> subprocess.Popen:
     """Start a rerun process in its own process group (stopped with everything it starts).
 
@@ -262,7 +270,8 @@ def start_viewer_process(cmd: list[str], log: Path | None = None, tmp: Path | No
     out = log.open("wb") if log is not None else None
     try:
         return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT if out else None,
-                                env=env, start_new_session=True)  # own group: a terminal's Ctrl-C is ours to pass on
+                                env=env, start_new_session=True,  # own group: a terminal's Ctrl-C is ours to pass on
+                                preexec_fn=die_with_parent)
     finally:
         if out is not None:
             out.close()
@@ -343,7 +352,8 @@ def start_live_viewer(web: bool, bind: str = "127.0.0.1", grpc_port: int = GRPC_
     address = resolve_bind(bind)
     warn_if_exposed(address)
     process = subprocess.Popen(live_viewer_command(web, address, grpc_port, web_port), stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL, env=rerun_env(), start_new_session=True)
+                               stderr=subprocess.DEVNULL, env=rerun_env(), start_new_session=True,
+                               preexec_fn=die_with_parent)
     return grpc_url(connect_host(address), grpc_port), process
 
 

@@ -136,6 +136,19 @@ def test_web_view_prints_the_url_and_sigterm_stops_the_server_and_removes_its_fi
     assert_stopped(process, tmp_path, web_port, grpc_port, server)
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_the_server_ends_when_topside_is_killed(recording: Path, tmp_path: Path) -> None:
+    process, _, web_port, grpc_port = serve(recording, tmp_path)
+    [server] = children(process.pid)
+    process.send_signal(signal.SIGKILL)  # no handler runs: the kernel tells the server its parent died
+    process.communicate(timeout=STOP_TIMEOUT_S)
+    deadline = time.monotonic() + STOP_TIMEOUT_S
+    while group_members(server) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert group_members(server) == []
+    assert not listening_addresses(web_port) and not listening_addresses(grpc_port)
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGHUP])
 def test_web_view_on_localhost_stops_on_ctrl_c_twice_or_a_hangup(recording: Path, tmp_path: Path, signum: int) -> None:
     process, url, web_port, grpc_port = serve(recording, tmp_path, "--bind", "localhost")
