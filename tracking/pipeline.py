@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import heapq
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from tracking.camera import CameraModel, load_camera
 from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetector, Refinement
 from tracking.errors import InputError
-from tracking.images import Frame, frames
+from tracking.images import Frame, VideoHealth, frames, to_the_end
 from tracking.marker_tracker import MarkerTracker
 from tracking.offsets import (
     BodyGeometry,
@@ -55,6 +55,8 @@ class TrackStats:
     pair_offsets: Counter = field(default_factory=Counter)
     ambiguous: Counter = field(default_factory=Counter)
     unknown_ids: Counter = field(default_factory=Counter)  # id -> detections
+    videos: dict[str, VideoHealth] = field(default_factory=dict)  # camera -> its video's health: as of its newest
+    # frame (the last carries the health at the video's end), or as track_rig(stats=) keeps it (frames or not)
 
     def add(self, r: FrameResult) -> None:
         """Count one frame's results."""
@@ -63,6 +65,20 @@ class TrackStats:
         self.pair_offsets[r.camera] += len(r.offsets)
         self.ambiguous[r.camera] += sum(o.choice == Choice.AMBIGUOUS for o in r.offsets)
         self.unknown_ids.update(r.unknown_ids)
+        if r.frame.video is not None:
+            self.videos[r.camera] = r.frame.video
+
+    def warnings(self, cameras: Iterable[str] = ()) -> list[str]:
+        """One line per camera whose video ended early, or whose timestamps went backwards, repeated, jumped or were
+        missing, or that gave no frame at all; cameras: the names expected (a camera never heard of is reported)."""
+        lines = []
+        for camera in dict.fromkeys([*self.videos, *cameras]):
+            video = self.videos.get(camera)
+            if video is not None and video.troubled():
+                lines.append(f"{camera}: {video.summary()}")
+            elif not self.frames[camera]:
+                lines.append(f"{camera}: no frame could be read" + (f" from {video.source}" if video else ""))
+        return lines
 
 
 @dataclass
@@ -114,24 +130,35 @@ class CameraTracker:
         """A frame recorded but not searched for markers (the tracker is behind real time)."""
         return FrameResult(self.entry.name, frame, Detections([]), {}, [], [], tracked=False)
 
-    def run(self) -> Iterator[FrameResult]:
-        """Every frame of the camera's source, processed."""
+    def run(self, health: VideoHealth | None = None) -> Iterator[FrameResult]:
+        """Every frame of the camera's source, processed; the last one carries the video's health at its end
+        (health: filled as the frames go)."""
         source = self.entry.source
         path = self.rig.resolve(source)
         src = path if path.exists() or not source.startswith(("rtsp:", "http:", "https:")) else source
-        for frame in frames(src, self.entry.time_offset, keep_color=self.keep_color, packets=self.packets):
+        health = health if health is not None else VideoHealth()
+        for frame in to_the_end(frames(src, self.entry.time_offset, keep_color=self.keep_color,
+                                       packets=self.packets, health=health), health):
             yield self.process(frame)
 
 
 def track_rig(rig: Rig, refinement: Refinement = DEFAULT_REFINEMENT, cameras: list[str] | None = None,
               keep_color: bool = False, on_frame: Callable[[FrameResult], None] | None = None,
-              packets: bool = False, roi_tracking: bool = False) -> Iterator[FrameResult]:
-    """All cameras of a rig, merged into one stream ordered by capture time (roi_tracking: see MarkerTracker)."""
+              packets: bool = False, roi_tracking: bool = False, stats: TrackStats | None = None
+              ) -> Iterator[FrameResult]:
+    """All cameras of a rig, merged into one stream ordered by capture time (roi_tracking: see MarkerTracker).
+
+    stats: keeps every camera's video health from the start, so that a video giving no frame at all is reported
+    with its counts too (the results are not counted in it: TrackStats.add does that)."""
     entries = [c for c in rig.cameras if cameras is None or c.name in cameras]
     if not entries:
         raise InputError(rig.path, "no cameras to track (expected at least one)", "cameras")
     trackers = [CameraTracker.from_rig(rig, e, refinement, keep_color, packets, roi_tracking) for e in entries]
-    for result in heapq.merge(*(t.run() for t in trackers), key=lambda r: r.time):
+    healths = [VideoHealth() for _ in trackers]
+    if stats is not None:
+        stats.videos.update({t.entry.name: h for t, h in zip(trackers, healths, strict=True)})
+    # merge needs each camera's times in order: the decoder drops (and counts) a frame not after its predecessor
+    for result in heapq.merge(*(t.run(h) for t, h in zip(trackers, healths, strict=True)), key=lambda r: r.time):
         if on_frame is not None:
             on_frame(result)
         yield result

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from tracking.errors import InputError
-from tracking.images import Frame, decoded_frames, frames, open_video
+from tracking.images import Frame, VideoHealth, decoded_frames, frames, open_video, to_the_end
 from tracking.rig import CameraEntry, Rig
 
 STREAM_PREFIXES = ("rtsp:", "rtsps:", "http:", "https:", "udp:", "tcp:", "srt:")
@@ -123,25 +123,31 @@ class H264Encoder:
 
 
 def device_frames(index: int, time_offset: float, clock: Callable[[], float] = time.time) -> Iterator[Frame]:
-    """Frames of a local camera, stamped on the wall clock as they are grabbed, with H.264 packets."""
+    """Frames of a local camera, stamped on the wall clock as they are grabbed, with H.264 packets and the health of
+    their times (a wall clock stepped back drops the frame; a stall over VideoHealth.jump_s counts as a jump)."""
     capture = cv2.VideoCapture(index)
     if not capture.isOpened():
         raise InputError(f"device {index}", "cannot be opened (expected a connected camera)")
     encoder = None
+    health = VideoHealth(f"device {index}")
     n = 0
     try:
         while True:
             ok = capture.grab()
-            t = clock() + time_offset
+            grabbed = clock()
             ok, bgr = capture.retrieve() if ok else (False, None)
             if not ok:
                 return
-            if encoder is None:
-                encoder = H264Encoder(bgr.shape[1], bgr.shape[0], capture.get(cv2.CAP_PROP_FPS) or 30.0)
-            packet, key = encoder.encode(bgr)
-            yield Frame(index=n, time=t, gray=cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY), packet=packet or None,
-                        keyframe=key)
             n += 1
+            if encoder is None:
+                fps = capture.get(cv2.CAP_PROP_FPS) or 30.0
+                encoder, health.interval_s = H264Encoder(bgr.shape[1], bgr.shape[0], fps), 1.0 / fps
+            t = health.stamp(grabbed)
+            if t is None:  # not encoded either, so the recorded H.264 never refers to it
+                continue
+            packet, key = encoder.encode(bgr)
+            yield Frame(index=n - 1, time=t + time_offset, gray=cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY),
+                        packet=packet or None, keyframe=key, video=health.report())
     finally:
         capture.release()
 
@@ -153,7 +159,7 @@ def stream_frames(url: str, time_offset: float, clock: Callable[[], float] = tim
         for frame in decoded_frames(container, url, 0.0, packets=True):
             anchor = clock() - frame.time if anchor is None else anchor
             yield Frame(index=frame.index, time=anchor + frame.time + time_offset, gray=frame.gray,
-                        packet=frame.packet, keyframe=frame.keyframe)
+                        packet=frame.packet, keyframe=frame.keyframe, video=frame.video)
 
 
 def file_frames(path: Path, time_offset: float, pacer: Pacer, loop_until: float | None = None) -> Iterator[Frame]:
@@ -164,7 +170,8 @@ def file_frames(path: Path, time_offset: float, pacer: Pacer, loop_until: float 
     shift, index = 0.0, 0
     while True:
         first = last = None
-        for frame in frames(path, time_offset, packets=True):
+        health = VideoHealth()  # the last frame carries whether the file ended early
+        for frame in to_the_end(frames(path, time_offset, packets=True, health=health), health):
             first = frame if first is None else first
             t = frame.time + shift
             if loop_until is not None and t > loop_until:

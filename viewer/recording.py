@@ -10,7 +10,7 @@ Entity layout (the jacket frame is the world):
     world/filter/cameras/<camera>        camera pose as the fused filter has it (all cameras, over time), a frustum
     world/truth/cameras/<camera>         camera pose in the truth log (the simulator's), a frustum
     offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, uncertainty/<axis>/<cone> (1σ),
-    health/<camera>/..., status
+    health/<camera>/..., health/<camera>/video/<count> and .../events (a video's problems), status
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import rerun as rr
 from tracking.camera import CameraModel
 from tracking.filtering import ConeEstimate
 from tracking.fusion import point_offset_matrix
-from tracking.images import Frame
+from tracking.images import Frame, VideoHealth
 from tracking.pipeline import FrameResult
 from tracking.pose import Choice, MarkerPose
 from tracking.rig import Rig
@@ -51,6 +51,8 @@ TOPSIDE_COLOR = (0, 200, 255)
 REJECTED_COLOR = (200, 0, 200)
 CHOICE_COLORS = {Choice.UNIQUE: (0, 255, 0), Choice.PAIR: (255, 255, 0), Choice.AMBIGUOUS: (255, 64, 0)}
 STATUS_PERIOD_S = 1.0
+VIDEO_COUNTS = ("decoded", "backwards", "repeated", "damaged", "jumps", "untimed")  # VideoHealth's counts, logged
+# once a video has a problem
 
 
 def set_capture_time(rec: rr.RecordingStream, t: float) -> None:
@@ -188,12 +190,29 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
 
 
 def log_health(rec: rr.RecordingStream, result: FrameResult) -> None:
-    """A camera's markers found and mean reprojection error in one frame."""
+    """A camera's markers found and mean reprojection error in one frame; its video's problems (see
+    log_video_health)."""
     set_capture_time(rec, result.time)
     rr.log(f"health/{result.camera}/markers", rr.Scalars(len(result.poses)), recording=rec)
     if result.poses:
         rr.log(f"health/{result.camera}/reprojection_error_px",
                rr.Scalars(float(np.mean([p.reprojection_error for p in result.poses.values()]))), recording=rec)
+    if result.frame.video is not None:
+        log_video_health(rec, result.camera, result.frame.video)
+
+
+def log_video_health(rec: rr.RecordingStream, camera: str, video: VideoHealth) -> None:
+    """At the current time, once a camera's video has had a problem: its counts (health/<camera>/video/<count>,
+    steps from the first problem on; nothing for a sound video), and as warnings (health/<camera>/video/events) the
+    first of each kind of problem, every jump, and an early end (with the last frame)."""
+    if video.troubled():
+        for name in VIDEO_COUNTS:
+            rr.log(f"health/{camera}/video/{name}", rr.Scalars(float(getattr(video, name))), recording=rec)
+        if video.ended and video.declared_frames is not None:  # beside decoded, at the end of a video
+            rr.log(f"health/{camera}/video/declared", rr.Scalars(float(video.declared_frames)), recording=rec)
+    if video.news:
+        rr.log(f"health/{camera}/video/events", rr.TextLog(f"{video.source}: {'; '.join(video.news)}",
+                                                          level=rr.TextLogLevel.WARN), recording=rec)
 
 
 def quaternions_xyzw(rotations: np.ndarray) -> np.ndarray:
