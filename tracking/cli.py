@@ -280,7 +280,7 @@ def track(
             task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras", total=total)
 
             def measurements():
-                for result in track_rig(the_rig, refine, packets=bool(sinks)):
+                for result in track_rig(the_rig, refine, packets=bool(sinks), stats=stats):
                     stats.add(result)
                     progress.advance(task)
                     for sink in sinks:
@@ -336,6 +336,8 @@ def _print_track_summary(rig: Rig, rig_path: Path, mode: str, stats: TrackStats)
     if stats.unknown_ids:
         summary = ", ".join(f"id {i}: {n}" for i, n in sorted(stats.unknown_ids.items()))
         console.print(f"markers not in the rig (ignored): {summary}", style="yellow")
+    for line in stats.warnings([c.name for c in rig.cameras]):  # videos cut short, timestamps back or jumping
+        err_console.print(f"topside: warning: {line}", style="yellow")
 
 
 def _archive_sink(rig: Rig, path: Path, options: dict[str, str], truth_df: pd.DataFrame | None,

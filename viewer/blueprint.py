@@ -51,7 +51,9 @@ def analysis_blueprint(rig: Rig, with_truth: bool) -> rrb.Blueprint:
     health = rrb.Tabs(*(
         rrb.TimeSeriesView(origin="health", contents=[f"health/{c.name}/{series}" for c in rig.cameras], name=title)
         for series, title in HEALTH_SERIES.items()),
-        rrb.TimeSeriesView(origin="uncertainty", name="estimate σ [m]"), name="camera health")
+        rrb.TimeSeriesView(origin="uncertainty", name="estimate σ [m]"),
+        rrb.TextLogView(origin="health", contents=[f"health/{c.name}/video/events" for c in rig.cameras],
+                        name="video problems"), name="camera health")
     middle = rrb.Vertical(
         rrb.Spatial3DView(origin="world", name="installation (jacket frame)", eye_controls=rrb.EyeControls3D(
             position=centre + EYE_OFFSET_M, look_target=centre, eye_up=[0.0, 0.0, 1.0])),
