@@ -309,3 +309,19 @@ def test_the_recording_holds_the_counts_and_the_warnings(installation: Path, tmp
                     "file may be cut short)"]]
     assert not [e for e in chunks if e.startswith("/health/cam-ahead/video")]
     assert "/health/cam-port/markers" in chunks  # the existing series stay where they were
+
+
+def test_track_says_so_in_its_summary(installation: Path, tmp_path: Path) -> None:
+    """The command prints the warning line of a video cut short, and still writes what it could track."""
+    import subprocess
+    import sys
+
+    remux(installation / "cam-port.mp4", tmp_path / "whole.mp4", options={"movflags": "+faststart"})
+    data = (tmp_path / "whole.mp4").read_bytes()
+    (tmp_path / "cut.mp4").write_bytes(data[:len(data) // 2])
+    rig = installation_copy(installation, tmp_path, "cut.mp4")
+    proc = subprocess.run([sys.executable, "-m", "tracking.cli", "track", "--rig", str(rig), "-o",
+                           str(tmp_path / "o.csv")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    warnings = [line for line in proc.stderr.splitlines() if line.startswith("topside: warning: cam-port: cut.mp4")]
+    assert len(warnings) == 1 and f"of {FRAMES} frames" in warnings[0]
