@@ -7,15 +7,27 @@ from OpenCV, from `topside calibrate` and from the simulator are interchangeable
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from tracking.errors import InputError
+from tracking.errors import InputError, a_or_an, one_line, read_text
+from tracking.outputs import atomic_path
 
 DISTORTION_SIZES = (4, 5, 8, 12, 14)
+MAX_IMAGE_SIDE_PX = 100_000  # beyond any sensor: a bigger image_width is a typo
+MAX_FOCAL_PX = 1e7  # beyond any lens on any sensor; keeps every projection finite
+RMS_KEY = "avg_reprojection_error"
+# what OpenCV's reader raises: its cv2.error, the SystemError its binding wraps that in, and UnicodeDecodeError for a
+# string it unescaped into invalid UTF-8 ("\\é" drops the é's first byte)
+OPENCV_READ_ERRORS = (cv2.error, SystemError, UnicodeDecodeError)
+# "error: (-212:Parsing error) parse in function 'file(3): Missing , ...'": the parser's line and complaint, or
+# "error: (-215:Assertion failed) nelems == m.total() in function 'read'": the kind of failure and its condition
+OPENCV_ERROR = re.compile(r"error: \(-?\d+:(?P<kind>[^)]*)\) (?P<what>.*?) in function "
+                          r"'(?:[^']*?\((?P<line>\d+)\): (?P<message>.*))?[^']*'\s*$")
 UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
 
 
@@ -48,73 +60,131 @@ class CameraModel:
         return px.reshape(-1, 2)
 
 
-def _read_matrix(fs: cv2.FileStorage, path: Path, key: str, required: bool = True) -> np.ndarray | None:
-    node = fs.getNode(key)
-    if node.empty() or node.isNone():
-        if required:
-            raise InputError(path, "missing (expected an OpenCV matrix)", key)
-        return None
-    mat = node.mat()
-    if mat is None:
-        raise InputError(path, "not an OpenCV matrix (expected !!opencv-matrix)", key)
-    return np.asarray(mat, dtype=np.float64)
+def opencv_reason(exc: BaseException) -> str:
+    """The useful part of an OpenCV error, one line: "line 3: Missing , between the elements" or the assertion."""
+    cause = exc if isinstance(exc, cv2.error) else (exc.__cause__ or exc.__context__ or exc)
+    text = one_line(str(cause))
+    found = OPENCV_ERROR.search(text)
+    if not found:
+        return text
+    if found.group("line"):
+        return f"line {found.group('line')}: {found.group('message')}"
+    return f"{found.group('kind').lower()}: {found.group('what')}"
 
 
-def _read_int(fs: cv2.FileStorage, path: Path, key: str) -> int:
+def open_storage(path: Path, what: str, fmt: int = cv2.FILE_STORAGE_FORMAT_YAML) -> cv2.FileStorage:
+    """An open OpenCV FileStorage of a small text file; a one-line InputError naming the file for anything its
+    reader refuses (missing, folder, unreadable, empty, binary, too large, not YAML). what: e.g. "calibration file"."""
+    text = read_text(path, what)
+    try:  # from memory: the file is read once, and its name (.gz, .json) cannot change how it is parsed
+        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY | fmt)
+    except OPENCV_READ_ERRORS as exc:
+        reason = opencv_reason(exc)
+        raise InputError(path, f"not OpenCV FileStorage YAML ({reason}); expected {a_or_an(what)}") from None
+    if not fs.isOpened():
+        raise InputError(path, f"not OpenCV FileStorage YAML (expected {a_or_an(what)})")
+    if not fs.root().isMap():
+        fs.release()
+        raise InputError(path, f"not a YAML mapping (expected {a_or_an(what)})")
+    return fs
+
+
+def present(node: cv2.FileNode) -> bool:
+    """True when a FileStorage node exists and holds something."""
+    return not (node.empty() or node.isNone())
+
+
+def read_integer(fs: cv2.FileStorage, path: Path, key: str, low: int, high: int, what: str) -> int:
+    """An integer field in [low, high]; a one-line InputError naming the field otherwise. what: its unit, for the
+    message ("an integer number of pixels")."""
     node = fs.getNode(key)
-    if node.empty() or node.isNone():
-        raise InputError(path, "missing (expected an integer number of pixels)", key)
+    if not present(node):
+        raise InputError(path, f"missing (expected {what})", key)
+    if not (node.isInt() or node.isReal()):  # real() of a string or a mapping is DBL_MAX, not an error
+        raise InputError(path, f"not a number (expected {what})", key)
     value = node.real()
-    if value <= 0 or value != int(value):
-        raise InputError(path, f"{value!r} is not a positive integer", key)
+    if not np.isfinite(value) or value != int(value) or not low <= value <= high:
+        raise InputError(path, f"{value!r} is not an integer from {low} to {high} (expected {what})", key)
     return int(value)
 
 
+def _read_matrix(fs: cv2.FileStorage, path: Path, key: str, max_elements: int) -> np.ndarray | None:
+    """A !!opencv-matrix field as float64, None when absent; its size is checked before OpenCV allocates it."""
+    node = fs.getNode(key)
+    if not present(node):
+        return None
+    expected = f"expected an !!opencv-matrix of at most {max_elements} numbers"
+    if not node.isMap():
+        raise InputError(path, f"not a matrix ({expected})", key)
+    sizes = [node.getNode(part) for part in ("rows", "cols")]
+    if not all(present(n) and n.isInt() for n in sizes) or not node.getNode("data").isSeq():
+        raise InputError(path, f"not a matrix: needs rows, cols, dt and data ({expected})", key)
+    rows, cols = (int(n.real()) for n in sizes)
+    if rows <= 0 or cols <= 0 or rows * cols > max_elements:
+        raise InputError(path, f"is {rows}x{cols} ({expected})", key)
+    try:
+        mat = node.mat()
+    except OPENCV_READ_ERRORS as exc:
+        raise InputError(path, f"not a readable matrix ({opencv_reason(exc)}); {expected}", key) from None
+    if mat is None:
+        raise InputError(path, f"not a matrix ({expected})", key)
+    values = np.asarray(mat, dtype=np.float64)
+    if not np.isfinite(values).all():
+        raise InputError(path, "holds NaN or infinity (expected finite numbers)", key)
+    return values
+
+
 def load_camera(path: str | Path) -> CameraModel:
-    """Read a camera model from an OpenCV FileStorage YAML file."""
+    """Read a camera model from an OpenCV FileStorage YAML file; a one-line InputError for anything else."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "calibration file not found")
+    fs = open_storage(path, "calibration file")
     try:
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_FORMAT_YAML)
-    except cv2.error as exc:
-        raise InputError(path, f"not an OpenCV FileStorage YAML file ({exc.err.strip()})") from None
-    if not fs.isOpened():
-        raise InputError(path, "not an OpenCV FileStorage YAML file")
-    try:
-        K = _read_matrix(fs, path, "camera_matrix")
-        dist = _read_matrix(fs, path, "distortion_coefficients")
-        width = _read_int(fs, path, "image_width")
-        height = _read_int(fs, path, "image_height")
-        rms_node = fs.getNode("avg_reprojection_error")
-        rms = None if rms_node.empty() or rms_node.isNone() else float(rms_node.real())
+        K = _read_matrix(fs, path, "camera_matrix", 9)
+        if K is None:
+            raise InputError(path, "missing (expected an OpenCV matrix)", "camera_matrix")
+        dist = _read_matrix(fs, path, "distortion_coefficients", max(DISTORTION_SIZES))
+        if dist is None:
+            raise InputError(path, "missing (expected an OpenCV matrix)", "distortion_coefficients")
+        width = read_integer(fs, path, "image_width", 1, MAX_IMAGE_SIDE_PX, "an integer number of pixels")
+        height = read_integer(fs, path, "image_height", 1, MAX_IMAGE_SIDE_PX, "an integer number of pixels")
+        rms = _read_rms(fs, path)
     finally:
         fs.release()
-    assert K is not None and dist is not None
-    if K.shape != (3, 3) or K[0, 0] <= 0 or K[1, 1] <= 0 or K[2, 2] != 1.0:
-        raise InputError(path, f"expected a 3x3 matrix with fx, fy > 0 and K[2,2] = 1, got {K.tolist()}",
-                         "camera_matrix")
-    dist = dist.reshape(-1)
-    if dist.size not in DISTORTION_SIZES:
-        raise InputError(path, f"expected 4, 5, 8, 12 or 14 coefficients, got {dist.size}",
+    if K.shape != (3, 3) or not (0 < K[0, 0] <= MAX_FOCAL_PX and 0 < K[1, 1] <= MAX_FOCAL_PX) \
+            or K[2].tolist() != [0, 0, 1] or K[1, 0] != 0:
+        raise InputError(path, f"expected a 3x3 matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with 0 < fx, fy <= "
+                               f"{MAX_FOCAL_PX:g}, got {K.tolist()}", "camera_matrix")
+    if min(dist.shape) != 1 or dist.size not in DISTORTION_SIZES:
+        shape = "x".join(map(str, dist.shape))
+        raise InputError(path, f"expected a vector of 4, 5, 8, 12 or 14 coefficients, got a {shape} matrix",
                          "distortion_coefficients")
-    return CameraModel(K=K, dist=dist, width=width, height=height, rms=rms)
+    return CameraModel(K=K, dist=dist.reshape(-1), width=width, height=height, rms=rms)
+
+
+def _read_rms(fs: cv2.FileStorage, path: Path) -> float | None:
+    """The optional avg_reprojection_error, px: a finite number >= 0."""
+    node = fs.getNode(RMS_KEY)
+    if not present(node):
+        return None
+    value = node.real() if node.isInt() or node.isReal() else float("nan")
+    if not (np.isfinite(value) and value >= 0):
+        raise InputError(path, "expected a finite number of pixels >= 0", RMS_KEY)
+    return float(value)
 
 
 def save_camera(path: str | Path, camera: CameraModel, extra: dict[str, float | int | str] | None = None) -> None:
-    """Write a camera model as OpenCV's calibration sample does (FileStorage YAML)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
-    fs.write("image_width", int(camera.width))
-    fs.write("image_height", int(camera.height))
-    fs.write("camera_matrix", np.asarray(camera.K, dtype=np.float64))
-    fs.write("distortion_coefficients", np.asarray(camera.dist, dtype=np.float64).reshape(-1, 1))
-    if camera.rms is not None:
-        fs.write("avg_reprojection_error", float(camera.rms))
-    for key, value in (extra or {}).items():
-        if isinstance(value, np.ndarray):
-            fs.write(key, value)
-        else:
-            fs.write(key, value)
-    fs.release()
+    """Write a camera model as OpenCV's calibration sample does (FileStorage YAML), atomically: the file appears
+    complete under its name or not at all."""
+    with atomic_path(Path(path)) as partial:  # <stem>.partial.yaml: keeps the suffix OpenCV may look at
+        fs = cv2.FileStorage(str(partial), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
+        try:
+            fs.write("image_width", int(camera.width))
+            fs.write("image_height", int(camera.height))
+            fs.write("camera_matrix", np.asarray(camera.K, dtype=np.float64))
+            fs.write("distortion_coefficients", np.asarray(camera.dist, dtype=np.float64).reshape(-1, 1))
+            if camera.rms is not None:
+                fs.write(RMS_KEY, float(camera.rms))
+            for key, value in (extra or {}).items():
+                fs.write(key, value)
+        finally:
+            fs.release()

@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracking.camera import CameraModel
+from tracking.camera import OPENCV_READ_ERRORS, CameraModel, open_storage, present, read_integer
 from tracking.corners import refine_corners_batch
 from tracking.errors import InputError
 
@@ -43,6 +43,10 @@ RAIN_REFINE_MIN_CELL_PX = 6.0  # edge-fit on the opened image only for markers w
 SUBPIX_WIN = 3  # px half-window for CORNER_REFINE_SUBPIX; tuned in benchmarks/corners.py
 SUBPIX_MAX_ITER = 50
 SUBPIX_MIN_ACCURACY = 0.01  # px
+MIN_MARKER_BITS = 2  # code cells a side of a custom dictionary's markers (predefined ones: 4 to 7)
+MAX_MARKER_BITS = 16
+MAX_DICTIONARY_MARKERS = 100_000  # predefined dictionaries hold at most 1000
+SHOWN_CHARS = 40  # of a bad marker string, in its error
 
 
 @dataclass(frozen=True)
@@ -74,15 +78,51 @@ def load_dictionary(name_or_path: str) -> cv2.aruco.Dictionary:
                                              "(expected e.g. DICT_6X6_250 or a dictionary YAML file)")
         return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name_or_path))
     path = Path(name_or_path)
-    if not path.is_file():
+    if not path.exists():
         raise InputError(path, "dictionary file not found (expected e.g. DICT_6X6_250 or a YAML file)")
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    dictionary = cv2.aruco.Dictionary()
-    ok = fs.isOpened() and dictionary.readDictionary(fs.root())
-    fs.release()
-    if not ok or dictionary.bytesList is None or len(dictionary.bytesList) == 0:
-        raise InputError(path, "not an ArUco dictionary (expected nmarkers, markersize, marker_N)")
-    return dictionary
+    return read_dictionary(path)
+
+
+def read_dictionary(path: Path) -> cv2.aruco.Dictionary:
+    """A custom dictionary from an OpenCV YAML file (nmarkers, markersize, marker_0 ..., optional maxCorrectionBits),
+    as OpenCV's Dictionary.writeDictionary writes it; a one-line InputError naming the file and field otherwise.
+
+    The fields are checked here and the dictionary built from the bits: OpenCV's readDictionary writes a marker
+    string longer than markersize² past its buffer (a crash) and takes a shorter one with uninitialised bits.
+    """
+    fs = open_storage(path, "dictionary YAML file", cv2.FILE_STORAGE_FORMAT_AUTO)
+    try:
+        count = read_integer(fs, path, "nmarkers", 1, MAX_DICTIONARY_MARKERS, "the number of markers")
+        bits = read_integer(fs, path, "markersize", MIN_MARKER_BITS, MAX_MARKER_BITS, "code cells a side")
+        correction = 0
+        if present(fs.getNode("maxCorrectionBits")):
+            correction = read_integer(fs, path, "maxCorrectionBits", 0, bits * bits, "a number of bits")
+        codes = [_marker_bits(fs, path, i, bits) for i in range(count)]
+    finally:
+        fs.release()
+    byte_list = np.concatenate([cv2.aruco.Dictionary.getByteListFromBits(code) for code in codes])
+    return cv2.aruco.Dictionary(byte_list, bits, correction)
+
+
+def _marker_bits(fs: cv2.FileStorage, path: Path, index: int, bits: int) -> np.ndarray:
+    """(bits, bits) uint8 code of marker_<index>: a quoted string of bits² zeros and ones, row by row."""
+    key = f"marker_{index}"
+    node = fs.getNode(key)
+    expected = f"expected a quoted string of {bits * bits} zeros and ones"
+    if not present(node):
+        raise InputError(path, f"missing ({expected}; nmarkers says there are more)", key)
+    if not node.isString():  # unquoted digits read as a number and lose their leading zeros
+        raise InputError(path, f"not a string ({expected})", key)
+    try:
+        code = node.string()
+    except OPENCV_READ_ERRORS:
+        raise InputError(path, f"not readable text ({expected})", key) from None
+    shown = f"{code[:SHOWN_CHARS]!r}{'...' if len(code) > SHOWN_CHARS else ''}"
+    if len(code) != bits * bits:
+        raise InputError(path, f"{shown} has {len(code)} characters ({expected})", key)
+    if set(code) - {"0", "1"}:
+        raise InputError(path, f"{shown} holds other characters ({expected})", key)
+    return np.frombuffer(code.encode(), dtype=np.uint8).reshape(bits, bits) - ord("0")
 
 
 def detector_parameters(refinement: Refinement = DEFAULT_REFINEMENT) -> cv2.aruco.DetectorParameters:

@@ -11,20 +11,38 @@ looks astern (+y); its x axis then points to starboard (-x).
 
 from __future__ import annotations
 
+import re
 from functools import cached_property
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from tracking.errors import InputError, read_yaml
+from tracking.outputs import write_text
+
+MAX_COORDINATE_M = 1e6  # an installation spans tens of metres; this bound only keeps every product finite
+MAX_MARKER_SIZE_M = 100.0
+MAX_TIME_OFFSET_S = 1e10  # beyond the Unix clock's 300 years: a clock offset past it is a typo
+INTERNAL_FIELDS = ("path", "warnings")  # set by load_rig, never by the file
+SIMPLE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")  # a location part printed bare; anything else is quoted
+
+
+def _number(value: Any) -> Any:
+    """Refuses a YAML boolean (true, yes, on) where a number is expected; pydantic would read it as 1 or 0."""
+    if isinstance(value, bool):
+        raise ValueError(f"expected a number, got {str(value).lower()}")
+    return value
+
 
 Body = Literal["jacket", "topside"]
 Mount = Literal["fixed", "vessel", "drone"]  # on the jacket or a platform; on the crane vessel (waves); flying
-Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+DEFAULT_MOUNT: Mount = "drone"  # the loosest motion prior: what a camera without `mount` gets
+Coordinate = Annotated[float, BeforeValidator(_number), Field(ge=-MAX_COORDINATE_M, le=MAX_COORDINATE_M)]
+Vec3 = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
 
 _D = float(np.sqrt(0.5))
 FACE_NORMALS: dict[str, tuple[float, float, float]] = {
@@ -56,7 +74,7 @@ def face_rotation(face: str) -> np.ndarray:
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN or inf: an error, not a row
 
 
 class Marker(_Model):
@@ -102,10 +120,21 @@ class CameraEntry(_Model):
     """A camera: its calibration file, its video source, its clock offset and how it is mounted."""
 
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
-    calibration: str
-    source: str
-    time_offset: float = 0.0  # s, added to the video's timestamps to give capture time on the common clock
-    mount: Mount = "drone"  # how much the camera may move: the fusion filter's motion prior for its pose
+    calibration: str = Field(min_length=1)
+    source: str = Field(min_length=1)  # a device index (0), a stream URL or a video file
+    # s, added to the video's timestamps to give capture time on the common clock
+    time_offset: Annotated[float, BeforeValidator(_number), Field(ge=-MAX_TIME_OFFSET_S, le=MAX_TIME_OFFSET_S)] = 0.0
+    mount: Mount = DEFAULT_MOUNT  # how much the camera may move: the fusion filter's motion prior for its pose
+
+    @field_validator("source", mode="before")
+    @classmethod
+    def _device_index(cls, value: Any) -> Any:
+        """A device index written as a YAML integer (source: 0) is the string "0"."""
+        if isinstance(value, int) and not isinstance(value, bool):
+            if value < 0:
+                raise ValueError(f"device index {value} is negative (expected 0, 1, ..., a stream URL or a file)")
+            return str(value)
+        return value
 
 
 class Rig(_Model):
@@ -113,12 +142,13 @@ class Rig(_Model):
 
     name: str = "installation"
     dictionary: str = "DICT_6X6_250"
-    marker_size: float = Field(gt=0)  # edge of the black square, m
+    marker_size: Annotated[float, BeforeValidator(_number), Field(gt=0, le=MAX_MARKER_SIZE_M)]  # black square, m
     cones: dict[str, Vec3] = Field(default_factory=dict)  # cone tip on the jacket, jacket frame, m
     markers: list[Marker]
     pairs: list[Pair] = Field(default_factory=list)
     cameras: list[CameraEntry] = Field(default_factory=list)
     path: Path = Field(default=Path("rig.yaml"), exclude=True)  # the file it was read from
+    warnings: tuple[str, ...] = Field(default=(), exclude=True)  # one line each, set by load_rig, for the CLI to print
 
     @property
     def base_dir(self) -> Path:
@@ -138,6 +168,10 @@ class Rig(_Model):
         dup = sorted({i for i in ids if ids.count(i) > 1})
         if dup:
             raise ValueError(f"duplicate marker id {dup[0]} (each id may appear once)")
+        count = dictionary_size(self.dictionary)
+        for i, m in enumerate(self.markers):
+            if m.id >= count:
+                raise ValueError(f"markers[{i}].id: {m.id} is not in {self.dictionary} (expected 0 to {count - 1})")
         by_id = {m.id: m for m in self.markers}
         names = [c.name for c in self.cameras]
         dup_cam = sorted({n for n in names if names.count(n) > 1})
@@ -193,21 +227,50 @@ class Rig(_Model):
         return p if p.is_absolute() else self.base_dir / p
 
 
+def dictionary_size(name: str) -> int:
+    """How many markers a predefined ArUco dictionary (DICT_6X6_250) holds."""
+    return int(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)).bytesList.shape[0])
+
+
 def _format_location(loc: tuple) -> str:
     out = ""
     for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif SIMPLE_KEY.match(str(part)):
+            out += f".{part}" if out else str(part)
+        else:  # a key from the file (a cone's name) that would read as punctuation or break the line
+            out += f"[{str(part)!r}]"
     return out
+
+
+def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
+    """One line per default the file leaves to the tracker that changes its numbers: a camera without `mount`,
+    cones without a tip."""
+    out = [f"{path}: cameras[{i}].mount: not given; {cam.name} is treated as a {DEFAULT_MOUNT} (the loosest motion "
+           "prior: a still camera reads worse; give fixed or vessel)"
+           for i, cam in enumerate(rig.cameras) if "mount" not in cam.model_fields_set]
+    paired = sorted({pair.cone for pair in rig.all_pairs()})
+    tipless = [cone for cone in paired if cone not in rig.cones]
+    if tipless and not rig.cones:
+        out.append(f"{path}: cones: not given; each cone's offset is reported at its topside marker's centre, "
+                   "not at the cone tip")
+    elif tipless:
+        out.append(f"{path}: cones: no tip for {', '.join(tipless)}; reported at the topside marker's centre, "
+                   "not at the cone tip")
+    return tuple(out)
 
 
 def load_rig(path: str | Path) -> Rig:
     """Read and validate a rig file; errors name the file and the field."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "rig file not found")
-    data = read_yaml(path)
+    data = read_yaml(path, "rig file")  # names a missing, folder, empty, binary or non-YAML file
     if not isinstance(data, dict):
         raise InputError(path, "expected a mapping with dictionary, marker_size, markers, cameras")
+    for key in INTERNAL_FIELDS:
+        if key in data:
+            raise InputError(path, "not a rig field (expected name, dictionary, marker_size, cones, markers, pairs, "
+                                   "cameras)", key)
     try:
         rig = Rig.model_validate(data)
     except ValidationError as exc:
@@ -220,10 +283,10 @@ def load_rig(path: str | Path) -> Rig:
         if err["type"] == "literal_error":
             msg = f"got {err['input']!r}; {msg[0].lower()}{msg[1:]}"
         raise InputError(path, msg, loc or None) from None
-    return rig.model_copy(update={"path": path})
+    return rig.model_copy(update={"path": path, "warnings": rig_warnings(path, rig)})
 
 
 def save_rig(path: str | Path, rig: Rig) -> None:
-    """Write a rig file (the simulator and tests use it; people write theirs by hand)."""
+    """Write a rig file atomically (the simulator and tests use it; people write theirs by hand)."""
     data = rig.model_dump(mode="json", exclude_none=True)
-    Path(path).write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+    write_text(Path(path), yaml.safe_dump(data, sort_keys=False, default_flow_style=None))

@@ -38,3 +38,99 @@ def test_undistort_inverts_project() -> None:
     px = cam.project(pts)
     ideal = cam.undistort_points(px)
     np.testing.assert_allclose(ideal, (pts[:, :2] * 1000 + [460, 300]), atol=1e-6)
+
+
+# --- anything OpenCV's reader refuses, and values it would take, are one line naming the file ---------------------
+
+GOOD = """%YAML:1.0
+---
+image_width: 920
+image_height: 600
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 1258.27, 0., 468.746, 0., 1259.0, 296.561, 0., 0., 1. ]
+distortion_coefficients: !!opencv-matrix
+   rows: 5
+   cols: 1
+   dt: d
+   data: [ -0.1, 0.05, 0., 0., 0. ]
+avg_reprojection_error: 0.2
+"""
+
+
+def _calibration(tmp_path: Path, text: str | bytes) -> Path:
+    path = tmp_path / "cam.yaml"
+    path.write_bytes(text.encode() if isinstance(text, str) else text)
+    return path
+
+
+def test_good_calibration_loads(tmp_path: Path) -> None:
+    cam = load_camera(_calibration(tmp_path, GOOD))
+    assert cam.image_size == (920, 600) and cam.dist.shape == (5,) and cam.rms == 0.2
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    (b"", "is empty (expected a calibration file)"),
+    (b"   \n", "is empty"),
+    (b"\x00\x01\x02\x03", "is binary, not text"),
+    (b"\xff\xfe\xfd camera_matrix", "is binary, not text"),
+    (b"hello world", "not OpenCV FileStorage YAML (line 1: Only collections as YAML streams are supported"),
+    (b"%YAML:1.0\nfoo: [1, 2", "not OpenCV FileStorage YAML (line 2"),
+    (b"%YAML:1.0\n- 1\n- 2\n", "not a YAML mapping"),
+])
+def test_not_a_calibration_file(tmp_path: Path, content: bytes, message: str) -> None:
+    path = _calibration(tmp_path, content)
+    with pytest.raises(InputError) as info:
+        load_camera(path)
+    text = str(info.value)
+    assert text.startswith(f"{path}: ") and message in text and len(text.splitlines()) == 1
+
+
+def test_folder_and_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="is a folder"):
+        load_camera(tmp_path)
+    with pytest.raises(InputError, match="calibration file not found"):
+        load_camera(tmp_path / "nope.yaml")
+
+
+@pytest.mark.parametrize(("old", "new", "message"), [
+    ("1258.27", ".nan", "camera_matrix: holds NaN or infinity"),
+    ("-0.1", ".inf", "distortion_coefficients: holds NaN or infinity"),
+    ("1258.27", "-5.", "camera_matrix: expected a 3x3 matrix"),
+    ("rows: 3\n   cols: 3", "rows: 1\n   cols: 9", "camera_matrix: expected a 3x3 matrix"),
+    ("0., 0., 1. ]", "0., 0., 2. ]", "camera_matrix: expected a 3x3 matrix"),
+    ("rows: 3\n   cols: 3", "rows: 30000\n   cols: 30000", "camera_matrix: is 30000x30000"),
+    ("rows: 5\n   cols: 1", "rows: 20\n   cols: 1", "distortion_coefficients: is 20x1"),
+    ("rows: 5\n   cols: 1\n   dt: d\n   data: [ -0.1, 0.05, 0., 0., 0. ]",
+     "rows: 1\n   cols: 3\n   dt: d\n   data: [ -0.1, 0.05, 0. ]", "distortion_coefficients: expected a vector of 4"),
+    ("rows: 5\n   cols: 1\n   dt: d\n   data: [ -0.1, 0.05, 0., 0., 0. ]",
+     "rows: 2\n   cols: 2\n   dt: d\n   data: [ -0.1, 0.05, 0., 0. ]", "distortion_coefficients: expected a vector"),
+    ("dt: d\n   data: [ 1258.27", "dt: q\n   data: [ 1258.27", "camera_matrix: not a readable matrix"),
+    ("data: [ 1258.27, 0.,", "data: [ 0.,", "camera_matrix: not a readable matrix"),
+    ("camera_matrix: !!opencv-matrix", "camera_matrix: 3\nunused: !!opencv-matrix", "camera_matrix: not a matrix"),
+    ("image_width: 920", "image_width: wide", "image_width: not a number"),
+    ("image_width: 920", "image_width: 0", "image_width: 0.0 is not an integer from 1"),
+    ("image_height: 600", "image_height: 600.5", "image_height: 600.5 is not an integer"),
+    ("image_height: 600", "image_height: 1e300", "image_height: 1e+300 is not an integer from 1 to 100000"),
+    ("avg_reprojection_error: 0.2", "avg_reprojection_error: -1", "avg_reprojection_error: expected a finite"),
+    ("avg_reprojection_error: 0.2", "avg_reprojection_error: .nan", "avg_reprojection_error: expected a finite"),
+    ("avg_reprojection_error: 0.2", "avg_reprojection_error: low", "avg_reprojection_error: expected a finite"),
+])
+def test_bad_values_name_the_field(tmp_path: Path, old: str, new: str, message: str) -> None:
+    assert old in GOOD
+    path = _calibration(tmp_path, GOOD.replace(old, new))
+    with pytest.raises(InputError) as info:
+        load_camera(path)
+    text = str(info.value)
+    assert text.startswith(f"{path}: ") and message in text and len(text.splitlines()) == 1
+
+
+def test_save_camera_is_atomic(tmp_path: Path) -> None:
+    cam = CameraModel(np.array([[1000.0, 0, 460], [0, 1000, 300], [0, 0, 1]]), np.zeros(5), 920, 600)
+    save_camera(tmp_path / "c.yaml", cam)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]  # written beside, renamed when complete
+    with pytest.raises(Exception):  # noqa: B017 - OpenCV's own error for a value FileStorage cannot write
+        save_camera(tmp_path / "d.yaml", cam, extra={"bad": object()})  # type: ignore[dict-item]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]  # a failure leaves nothing, not half a file

@@ -64,3 +64,104 @@ def test_bad_rig_names_the_field(tmp_path: Path, change, message: str) -> None:
         load_rig(_write(tmp_path, data))
     assert str(tmp_path / "rig.yaml") in str(info.value)
     assert "\n" not in str(info.value)
+
+
+# --- non-finite numbers, sizes, device indices, warnings, atomic writes -------------------------------------------
+
+@pytest.mark.parametrize(("change", "message"), [
+    (lambda d: d["markers"][1]["center"].__setitem__(1, float("nan")), "markers[1].center[1]: Input should be a"),
+    (lambda d: d["cones"]["A"].__setitem__(2, float("inf")), "cones.A[2]: Input should be a finite number"),
+    (lambda d: d["markers"][0].update(normal=[0.0, float("-inf"), 0.0]), "markers[0].normal[1]: Input should be a"),
+    (lambda d: d["pairs"][0].update(mated=[0, float("nan"), 1.8]), "pairs[0].mated[1]: Input should be a finite"),
+    (lambda d: d["cameras"][0].update(time_offset=float("nan")), "cameras[0].time_offset: Input should be a finite"),
+    (lambda d: d.update(marker_size=float("nan")), "marker_size: Input should be a finite number"),
+    (lambda d: d.update(marker_size=0), "marker_size: Input should be greater than 0"),
+    (lambda d: d.update(marker_size=True), "marker_size: expected a number, got true"),
+    (lambda d: d["markers"][0]["center"].__setitem__(0, 1e300), "markers[0].center[0]: Input should be less than"),
+    (lambda d: d["markers"][0].update(id=250), "markers[0].id: 250 is not in DICT_6X6_250 (expected 0 to 249)"),
+    (lambda d: d["cameras"][0].update(source=-1), "cameras[0].source: device index -1 is negative"),
+    (lambda d: d["cameras"][0].update(source=""), "cameras[0].source: String should have at least 1 character"),
+    (lambda d: d.update(warnings=["x"]), "warnings: not a rig field"),
+    (lambda d: d["cones"].update({"B\nC": [0, 0, float("nan")]}), "cones['B\\nC'][2]: Input should be a finite"),
+])
+def test_non_finite_and_bad_sizes_name_the_field(tmp_path: Path, change, message: str) -> None:
+    import copy
+
+    data = copy.deepcopy(RIG)
+    change(data)
+    with pytest.raises(InputError) as info:
+        load_rig(_write(tmp_path, data))
+    assert message in str(info.value)
+    assert str(info.value).startswith(str(tmp_path / "rig.yaml"))
+    assert len(str(info.value).splitlines()) == 1
+
+
+def test_yaml_nan_is_refused(tmp_path: Path) -> None:
+    text = yaml.safe_dump(RIG).replace("- -11.5\n", "- .nan\n", 1)
+    path = tmp_path / "rig.yaml"
+    path.write_text(text)
+    with pytest.raises(InputError, match=r"markers\[0\]\.center\[1\]: Input should be a finite number"):
+        load_rig(path)
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    (b"", "is empty (expected a rig file)"),
+    (b"\x00\x01\x02rig", "is binary, not text (expected a rig file)"),
+    (b"name: \xff\xfe", "is binary, not text"),
+    (b"a: [1, 2", "line 1: not valid YAML"),
+    (b"a: 2001-02-30", "not valid YAML (day is out of range for month)"),
+    (b"[" * 2000, "nested too deeply"),
+    (b"- 1\n- 2\n", "expected a mapping"),
+])
+def test_unreadable_rig_file_is_one_line(tmp_path: Path, content: bytes, message: str) -> None:
+    path = tmp_path / "rig.yaml"
+    path.write_bytes(content)
+    with pytest.raises(InputError, match=re.escape(message)) as info:
+        load_rig(path)
+    assert str(info.value).startswith(str(path)) and len(str(info.value).splitlines()) == 1
+
+
+def test_rig_folder_is_one_line(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="is a folder"):
+        load_rig(tmp_path)
+
+
+def test_device_index_source(tmp_path: Path) -> None:
+    data = {**RIG, "cameras": [{**RIG["cameras"][0], "source": 0, "mount": "fixed"}]}
+    rig = load_rig(_write(tmp_path, data))
+    assert rig.cameras[0].source == "0"
+    assert rig.warnings == ()
+
+
+def test_warnings_for_defaults_that_change_the_numbers(tmp_path: Path) -> None:
+    data = {**RIG, "cameras": [RIG["cameras"][0], {**RIG["cameras"][0], "name": "drone-1", "mount": "drone"}]}
+    data.pop("cones")
+    path = _write(tmp_path, data)
+    rig = load_rig(path)
+    assert len(rig.warnings) == 2
+    mount, cones = rig.warnings
+    assert mount.startswith(f"{path}: cameras[0].mount: not given; stern-1 is treated as a drone")
+    assert cones.startswith(f"{path}: cones: not given; each cone's offset is reported at its topside marker")
+    assert [c.mount for c in rig.cameras] == ["drone", "drone"]  # the warning changes nothing
+    assert "warnings" not in rig.model_dump() and "warnings" not in rig.model_dump(mode="json")
+
+
+def test_warning_for_a_cone_without_a_tip(tmp_path: Path) -> None:
+    data = yaml.safe_load(yaml.safe_dump(RIG))
+    data["cameras"][0]["mount"] = "vessel"
+    data["markers"] += [{"id": 3, "body": "jacket", "cone": "B", "face": "port", "center": [10.0, -10.0, -1.2]},
+                        {"id": 4, "body": "topside", "cone": "B", "face": "port", "center": [10.0, -10.0, 0.6]}]
+    data["pairs"].append({"cone": "B", "face": "port", "jacket": 3, "topside": 4})
+    rig = load_rig(_write(tmp_path, data))
+    assert rig.warnings == (f"{tmp_path / 'rig.yaml'}: cones: no tip for B; reported at the topside marker's centre, "
+                            "not at the cone tip",)
+
+
+def test_save_rig_is_atomic(tmp_path: Path) -> None:
+    from tracking.rig import save_rig
+
+    rig = load_rig(_write(tmp_path, RIG))
+    out = tmp_path / "out" / "saved.yaml"
+    save_rig(out, rig)
+    assert load_rig(out).model_dump() == rig.model_dump()
+    assert sorted(p.name for p in out.parent.iterdir()) == ["saved.yaml"]  # no temporary file left
