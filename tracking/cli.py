@@ -572,6 +572,7 @@ def evaluate(
     from rich.table import Table
 
     from tracking.evaluate import (
+        NO_VALUE,
         check_overlap,
         evaluate_runs,
         evaluation_markdown,
@@ -595,10 +596,11 @@ def evaluate(
     for col in ("axis", "e_MAE", "|e|max", "σ_e", "μ_e", "RMSE", "n"):
         table.add_column(col, justify="right")
     for axis, s in ev.axes.items():
-        table.add_row(axis, f"{s.mae:.3f}", f"{s.max_abs:.3f}", f"{s.std:.3f}", f"{s.mean:.3f}", f"{s.rmse:.3f}",
-                      str(s.n))
+        cells = [f"{v:.3f}" if s.n else NO_VALUE for v in (s.mae, s.max_abs, s.std, s.mean, s.rmse)]
+        table.add_row(axis, *cells, str(s.n))
     console.print(table)
-    console.print(f"lag {ev.lag_s:.2f} s (cross-correlation) · availability {ev.availability:.1%} "
+    lag_text = f"{ev.lag_s:.2f} s" if math.isfinite(ev.lag_s) else f"{NO_VALUE} (no axis moves enough to tell)"
+    console.print(f"lag {lag_text} (cross-correlation) · availability {ev.availability:.1%} "
                   f"(share of time with an estimate at most 0.5 s old)")
     if markdown:
         write_text(markdown, evaluation_markdown(ev))

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from tracking.errors import InputError, check_text_file
+from tracking.outputs import atomic_path
 
 AXES = ("dx", "dy", "dz")
 SIGMAS = ("sdx", "sdy", "sdz")
@@ -415,7 +416,8 @@ def plot_run(offsets: pd.DataFrame, truth: pd.DataFrame, out_dir: Path, name: st
             continue
         fig = cone_figure(rows, truth, str(cone), name)
         path = out_dir / f"{name}_cone_{UNSAFE_FILE_CHARS.sub('_', str(cone))}.png"  # a cone name is the file's text
-        fig.savefig(path, dpi=80)
+        with atomic_path(path) as partial:  # complete under its name, or not at all
+            fig.savefig(partial, dpi=80, format="png")
         plt.close(fig)
         written.append(path)
     return written
