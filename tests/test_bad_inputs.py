@@ -1,0 +1,236 @@
+"""Every command with bad input, through the real CLI in a subprocess: exit 2, one line on stderr naming the file or
+option, no traceback, every input byte-identical afterwards, and no output (temporary or not) left behind."""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+import subprocess
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from tests.conftest import FPS, FRAMES, T0, motion
+
+TOPSIDE = [sys.executable, "-m", "tracking.cli"]
+PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4
+BINARY = bytes(range(256)) * 16
+
+
+@dataclass(frozen=True)
+class Case:
+    """One bad input: how to prepare the folder, the command line, and what the one line must name."""
+
+    name: str
+    args: list[str]
+    names: tuple[str, ...]  # fragments the error line must hold (the file, the field or option)
+    prepare: Callable[[Path], None] | None = None
+
+
+def edit_rig(change: Callable[[dict], None], to: str = "bad-rig.yaml") -> Callable[[Path], None]:
+    """A preparation writing a changed copy of the rig."""
+
+    def prepare(folder: Path) -> None:
+        rig = yaml.safe_load((folder / "rig.yaml").read_text())
+        change(rig)
+        (folder / to).write_text(yaml.safe_dump(rig, sort_keys=False))
+
+    return prepare
+
+
+def write(name: str, data: bytes | str) -> Callable[[Path], None]:
+    """A preparation writing one file."""
+
+    def prepare(folder: Path) -> None:
+        path = folder / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data if isinstance(data, bytes) else data.encode())
+
+    return prepare
+
+
+def both(*steps: Callable[[Path], None]) -> Callable[[Path], None]:
+    """Several preparations in order."""
+
+    def prepare(folder: Path) -> None:
+        for step in steps:
+            step(folder)
+
+    return prepare
+
+
+def offsets_csv(shift_s: float = 0.0, cone: str = "A") -> str:
+    """A small offsets CSV as `topside track` writes it, at the installation's capture times (+ shift)."""
+    rows = ["time,cone,dx,dy,dz,cameras,sdx,sdy,sdz"]
+    for t in T0 + np.arange(FRAMES) / FPS:
+        d = motion(t)
+        rows.append(f"{t + shift_s:.6f},{cone},{d[0]:.5f},{d[1]:.5f},{d[2]:.5f},cam-ahead,0.01,0.01,0.01")
+    return "\n".join(rows) + "\n"
+
+
+def nan_centre(rig: dict) -> None:
+    rig["markers"][0]["center"][1] = float("nan")
+
+
+def calibration_with(name: str, old: str, new: str) -> Callable[[Path], None]:
+    """A copy of cam-ahead's calibration with one text replaced."""
+
+    def prepare(folder: Path) -> None:
+        text = (folder / "calibration/cam-ahead.yaml").read_text()
+        assert old in text
+        (folder / name).write_text(text.replace(old, new, 1))
+
+    return prepare
+
+
+def use_calibration(name: str) -> Callable[[Path], None]:
+    return edit_rig(lambda rig: rig["cameras"][0].update(calibration=name))
+
+
+def use_source(name: str) -> Callable[[Path], None]:
+    return edit_rig(lambda rig: rig["cameras"][0].update(source=name))
+
+
+RIG = ["--rig", "rig.yaml"]
+CASES = [
+    # track: outputs that are inputs, each other, folders, unwritable
+    Case("track -o the rig", ["track", *RIG, "-o", "rig.yaml"], ("rig.yaml", "--out", "input")),
+    Case("track --rrd a video", ["track", *RIG, "--rrd", "cam-ahead.mp4"], ("cam-ahead.mp4", "--rrd")),
+    Case("track --mcap a calibration", ["track", *RIG, "--mcap", "calibration/cam-port.yaml"],
+         ("cam-port.yaml", "--mcap")),
+    Case("track -o the truth", ["track", *RIG, "--truth", "truth.csv", "-o", "truth.csv"], ("truth.csv", "--out")),
+    Case("track -o a link to the rig", ["track", *RIG, "-o", "link.csv"], ("link.csv", "--out"),
+         lambda f: (f / "link.csv").symlink_to(f / "rig.yaml")),
+    Case("track -o and --rrd the same", ["track", *RIG, "-o", "x.csv", "--rrd", "x.csv"], ("x.csv", "--rrd")),
+    Case("track -o a folder", ["track", *RIG, "-o", "calibration"], ("calibration", "directory")),
+    Case("track -o under a file", ["track", *RIG, "-o", "truth.csv/offsets.csv"], ("offsets.csv", "not a folder")),
+    Case("track --mode unknown", ["track", *RIG, "--mode", "best"], ("--mode", "best")),
+    Case("track --video unknown", ["track", *RIG, "--mcap", "a.mcap", "--video", "gif"], ("--video", "gif")),
+    Case("track --key not a key", ["track", *RIG, "--mcap", "a.mcap", "--key", "truth.csv"], ("truth.csv",)),
+    # track: bad rigs and what they point to
+    Case("rig with a NaN centre", ["track", "--rig", "bad-rig.yaml"], ("bad-rig.yaml", "center"),
+         edit_rig(nan_centre)),
+    Case("rig with a negative marker size", ["track", "--rig", "bad-rig.yaml"], ("bad-rig.yaml", "marker_size"),
+         edit_rig(lambda rig: rig.update(marker_size=-1.0))),
+    Case("rig with an infinite time offset", ["track", "--rig", "bad-rig.yaml"], ("bad-rig.yaml", "time_offset"),
+         edit_rig(lambda rig: rig["cameras"][1].update(time_offset=float("inf")))),
+    Case("rig that is binary", ["track", "--rig", "bin.yaml"], ("bin.yaml",), write("bin.yaml", BINARY)),
+    Case("rig that is empty", ["track", "--rig", "empty.yaml"], ("empty.yaml",), write("empty.yaml", "")),
+    Case("rig that is a folder", ["track", "--rig", "calibration"], ("calibration",)),
+    Case("rig with an unknown mount", ["track", "--rig", "bad-rig.yaml"], ("bad-rig.yaml", "mount"),
+         edit_rig(lambda rig: rig["cameras"][0].update(mount="crane"))),
+    Case("calibration that is binary", ["track", "--rig", "bad-rig.yaml"], ("junk.yaml",),
+         both(write("junk.yaml", BINARY), use_calibration("junk.yaml"))),
+    Case("calibration that is not YAML", ["track", "--rig", "bad-rig.yaml"], ("junk.yaml",),
+         both(write("junk.yaml", "{{{ not: [yaml"), use_calibration("junk.yaml"))),
+    Case("calibration with a NaN focal length", ["track", "--rig", "bad-rig.yaml"], ("nan-cam.yaml", "camera_matrix"),
+         both(calibration_with("nan-cam.yaml", "data: [ ", "data: [ .Nan, "), use_calibration("nan-cam.yaml"))),
+    Case("video that is missing", ["track", "--rig", "bad-rig.yaml"], ("gone.mp4",), use_source("gone.mp4")),
+    Case("video that is a PNG", ["track", "--rig", "bad-rig.yaml", "--rrd", "r.rrd", "--mcap", "r.mcap"],
+         ("png.mp4",), both(write("png.mp4", PNG), use_source("png.mp4"))),
+    # detect
+    Case("detect --marker-size -1", ["detect", "cam-ahead.mp4", "--marker-size", "-1"], ("--marker-size",)),
+    Case("detect --marker-size nan", ["detect", "cam-ahead.mp4", "--marker-size", "nan"], ("--marker-size",)),
+    Case("detect --camera binary", ["detect", "cam-ahead.mp4", "--camera", "junk.yaml"], ("junk.yaml",),
+         write("junk.yaml", BINARY)),
+    Case("detect --dictionary binary", ["detect", "cam-ahead.mp4", "--dictionary", "dict.yaml"], ("dict.yaml",),
+         write("dict.yaml", BINARY)),
+    Case("detect an image that is missing", ["detect", "nothing.png"], ("nothing.png",)),
+    # calibrate
+    Case("calibrate -o a folder", ["calibrate", "a.png", "--board", "chessboard:9x6:0.025", "-o", "calibration"],
+         ("calibration", "directory"), write("a.png", PNG)),
+    Case("calibrate -o a photo", ["calibrate", "a.png", "--board", "chessboard:9x6:0.025", "-o", "a.png"],
+         ("a.png", "--out"), write("a.png", PNG)),
+    Case("calibrate --board nonsense", ["calibrate", "a.png", "--board", "chess:9", "-o", "c.yaml"], ("--board",),
+         write("a.png", PNG)),
+    Case("calibrate --subpix-window 0", ["calibrate", "a.png", "--board", "chessboard:9x6:0.025", "-o", "c.yaml",
+                                         "--subpix-window", "0"], ("--subpix-window",), write("a.png", PNG)),
+    # export
+    Case("export --mcap the recording", ["export", "run.rrd", "--mcap", "run.rrd"], ("run.rrd", "--mcap"),
+         write("run.rrd", BINARY)),
+    Case("export a PNG", ["export", "png.rrd", "--mcap", "out.mcap"], ("png.rrd",), write("png.rrd", PNG)),
+    Case("export --offsets missing", ["export", "run.rrd", "--mcap", "out.mcap", "--offsets", "no.csv"],
+         ("no.csv",), write("run.rrd", BINARY)),
+    # verify
+    Case("verify --recover a PNG", ["verify", "png.mcap", "--recover"], ("png.mcap", "MCAP"),
+         write("png.mcap", PNG)),
+    Case("verify --recover -o the archive", ["verify", "a.mcap", "--recover", "-o", "a.mcap"], ("a.mcap", "--out"),
+         write("a.mcap", BINARY)),
+    Case("verify a missing archive", ["verify", "none.mcap"], ("none.mcap",)),
+    Case("verify --key not a key", ["verify", "a.mcap", "--key", "rig.yaml"], ("rig.yaml",),
+         write("a.mcap", BINARY)),
+    # view
+    Case("view a missing recording", ["view", "none.rrd", "--web"], ("none.rrd",)),
+    Case("view a PNG", ["view", "png.rrd", "--web"], ("png.rrd",), write("png.rrd", PNG)),
+    Case("view --to before --from", ["view", "png.rrd", "--from", "5", "--to", "1"], ("--to",),
+         write("png.rrd", PNG)),
+    # evaluate
+    Case("evaluate without truth", ["evaluate", "offsets.csv"], ("offsets.csv",),
+         write("offsets.csv", offsets_csv())),
+    Case("evaluate an empty CSV", ["evaluate", "empty.csv", "truth.csv"], ("empty.csv",), write("empty.csv", "")),
+    Case("evaluate a binary CSV", ["evaluate", "bin.csv", "truth.csv"], ("bin.csv",), write("bin.csv", BINARY)),
+    Case("evaluate truth with no shared time", ["evaluate", "offsets.csv", "truth.csv"], ("offsets.csv", "truth.csv"),
+         write("offsets.csv", offsets_csv(shift_s=1000.0))),
+    Case("evaluate truth with no shared cone", ["evaluate", "offsets.csv", "truth.csv"], ("offsets.csv", "truth.csv"),
+         write("offsets.csv", offsets_csv(cone="Z"))),
+    Case("evaluate --markdown the offsets", ["evaluate", "offsets.csv", "truth.csv", "--markdown", "offsets.csv"],
+         ("offsets.csv", "--markdown"), write("offsets.csv", offsets_csv())),
+    Case("evaluate --markdown a folder", ["evaluate", "offsets.csv", "truth.csv", "--markdown", "calibration"],
+         ("calibration", "--markdown"), write("offsets.csv", offsets_csv())),
+    # simulate
+    Case("simulate an unknown scenario", ["simulate", "no-such-scenario", "-o", "sim"], ("no-such-scenario",)),
+    Case("simulate -o a file", ["simulate", "config1-procedure1", "-o", "rig.yaml"], ("rig.yaml", "--out")),
+    Case("simulate -o a folder of other files", ["simulate", "config1-procedure1", "-o", "."], ("--out",)),
+    Case("simulate --duration -1", ["simulate", "config1-procedure1", "-o", "sim", "--duration", "-1"],
+         ("--duration",)),
+    # live
+    Case("live -o the rig", ["live", *RIG, "-o", "rig.yaml"], ("rig.yaml", "--out")),
+    Case("live --speed 0", ["live", *RIG, "--speed", "0"], ("--speed",)),
+    Case("live --stale nan", ["live", *RIG, "--stale", "nan"], ("--stale",)),
+    Case("live over an earlier session", ["live", *RIG, "--rrd", "s.rrd", "-o", "s.csv"], ("s.csv", "earlier"),
+         write("s.csv", "time,cone\n")),
+]
+
+
+def snapshot(folder: Path) -> dict[str, str]:
+    """Every file under folder (links as their target's name) and its SHA-256."""
+    out = {}
+    for path in sorted(folder.rglob("*")):
+        key = str(path.relative_to(folder))
+        if path.is_symlink():
+            out[key] = f"-> {path.readlink()}"
+        elif path.is_file():
+            out[key] = hashlib.sha256(path.read_bytes()).hexdigest()
+        else:
+            out[key] = "folder"
+    return out
+
+
+def test_at_least_forty_cases_cover_every_command() -> None:
+    assert len(CASES) >= 40
+    assert {c.args[0] for c in CASES} >= {"track", "detect", "calibrate", "export", "verify", "view", "evaluate",
+                                         "simulate", "live"}
+    assert len({c.name for c in CASES}) == len(CASES)
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+def test_bad_input(case: Case, installation: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "work"
+    shutil.copytree(installation, folder)
+    if case.prepare is not None:
+        case.prepare(folder)
+    before = snapshot(folder)
+    proc = subprocess.run([*TOPSIDE, *case.args], cwd=folder, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("topside: error: ")
+    for fragment in case.names:
+        assert fragment in lines[0], lines[0]
+    assert snapshot(folder) == before  # inputs unchanged, nothing written, nothing half-written
