@@ -904,8 +904,11 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
     The backward pass runs whenever the kept steps span span_s + lag_s: from the newest step back, it gives the steps
     older than lag_s before the newest and lets them go, so memory holds span_s + lag_s of the run, not all of it.
     The cameras' nominal poses move as the filter runs; the backward pass treats their errors about
-    the nominal of each step as the state, which holds to first order. Cones are withheld by the live
-    filter's rule, its warm-up included: the smoother's first seconds rest on the same first frames.
+    the nominal of each step as the state, which holds to first order. A cone is shown where the live filter showed
+    it at that step (its σ limit and warm-up), with the live filter's covariance: the smoothed covariance counts the
+    frames after a step as independent of those before it, but a view's persistent corner errors are in both, so it
+    claimed σ of 30-45 mm at cones far from every marker (offsets resting on the topside's rotation) that were
+    100-200 mm off, and cones the live filter withheld were shown.
     """
     kf = TopsideFilter(rig, tuning or FilterTuning())
     steps: list[FilterStep] = []
@@ -923,20 +926,20 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
 
 
 def _smooth_back(kf: TopsideFilter, steps: list[FilterStep], until: float) -> Iterator[ConeEstimate]:
-    """One backward (RTS) pass from the newest of steps: the estimates of the steps before until, which leave steps."""
+    """One backward (RTS) pass from the newest of steps: the estimates of the steps before until, which leave steps;
+    each with its step's forward covariance (smoothed_estimates says why), so the smoothed covariance is not kept."""
     if not steps:
         return
     nxt = steps[-1]
-    x_s, P_s = nxt.x, nxt.P
-    out = [kf.cone_estimates(x_s, P_s, nxt.time, nxt.cameras, nxt.warming)] if nxt.time < until else []
+    x_s = nxt.x
+    out = [kf.cone_estimates(x_s, nxt.P, nxt.time, nxt.cameras, nxt.warming)] if nxt.time < until else []
     for step in reversed(steps[:-1]):
         n = step.x.size  # views first seen after this step are independent of it: their states drop out
         P_pred = nxt.F.covariance(step.P)
         C = np.linalg.solve(P_pred, nxt.F.apply(step.P)).T  # P Fᵀ P_pred⁻¹ (P_pred symmetric)
         x_s = step.x + C @ (x_s[:n] - nxt.x_pred)
-        P_s = step.P + C @ (P_s[:n, :n] - P_pred) @ C.T
         if step.time < until:
-            out.append(kf.cone_estimates(x_s, P_s, step.time, step.cameras, step.warming))
+            out.append(kf.cone_estimates(x_s, step.P, step.time, step.cameras, step.warming))
         nxt = step
     del steps[:len(out)]  # the smoothed ones are the oldest: the rest waits for more of the future
     for estimates in reversed(out):

@@ -493,3 +493,85 @@ def test_a_near_tie_between_ippe_options_does_not_place_a_camera() -> None:
     placed = kf.cameras["far"].T_jacket_camera
     assert placed is not None
     assert np.abs(placed - np.linalg.inv(T)).max() < 1e-6
+
+
+ONE_CONE_EYES = {"stern1": np.array([38.0, -45.0, 2.0]), "stern2": np.array([-6.0, -45.0, 2.0])}  # the simulator's
+# configuration-1 stern cameras of cone A, 38-42 m from its markers
+ONE_CONE_FACES = {"port-ahead": np.array([0.7071, -0.7071, 0.0]), "starboard-ahead": np.array([-0.7071, -0.7071, 0.0])}
+PERSISTENT_CORNER_PX = 0.05  # σ of each view's corner errors held for a whole run: still markers in still cameras keep
+# whole-run mean errors of 0.03-0.11 px per coordinate (README, "Corner biases per view")
+OBLIQUE_COS = 0.25  # markers up to 75° off their normal are detected: the simulator's stern cameras of cone A find the
+# other face's markers there (74°) in 9-17 % of their frames
+
+
+def one_cone_rig() -> Rig:
+    """Marker pairs on cone A's two faces towards the vessel only, watched by one stern camera each; all four cones."""
+    markers = []
+    for k, (face, normal) in enumerate(ONE_CONE_FACES.items()):
+        centre = np.array(CONES["A"]) + 1.1 * normal
+        for mid, body, z in ((2 * k, "jacket", -2.5), (2 * k + 1, "topside", -0.5)):
+            markers.append({"id": mid, "body": body, "cone": "A", "face": face,
+                            "center": [*centre[:2], centre[2] + z]})
+    cams = [{"name": n, "calibration": f"{n}.yaml", "source": f"{n}.mp4", "mount": "vessel"} for n in ONE_CONE_EYES]
+    return Rig.model_validate({"marker_size": 1.0, "cones": CONES, "markers": markers, "cameras": cams})
+
+
+def one_cone_topside_T(t: float) -> np.ndarray:
+    """T_jacket_topside at time t: moving to port at 0.17 m/s (procedure 2's 10 m a minute), twisting by ±1.7 mrad."""
+    yaw = 0.0017 * np.sin(2 * np.pi * t / 24.0)
+    T = np.eye(4)
+    T[:3, :3] = rotation(np.array([0.0, 0.0, yaw]))
+    T[:3, 3] = [0.17 * t, 0.0, 2.0]
+    return T
+
+
+def one_cone_observations(the_rig: Rig, seconds: float, seed: int = 0) -> list[BodyObservation]:
+    """Both stern cameras at 15 FPS, still: corners with 0.1 px noise besides a persistent error per view."""
+    from tests.synthetic import look_at
+
+    rng = np.random.default_rng(seed)
+    camera = CameraModel(K, np.zeros(5), 920, 600)
+    geometry = body_geometry(the_rig)
+    persistent = {(n, m.id): rng.normal(0.0, PERSISTENT_CORNER_PX, (4, 2))
+                  for n in ONE_CONE_EYES for m in the_rig.markers}
+    out = []
+    for k, (name, eye) in enumerate(ONE_CONE_EYES.items()):
+        T_camera_jacket = np.linalg.inv(look_at(eye, np.array([14.0, -10.8, 0.0])))
+        for t in np.arange(0.0, seconds, 1 / 15) + 0.011 * k:
+            poses = {}
+            for m in the_rig.markers:
+                T = T_camera_jacket @ (one_cone_topside_T(t) if m.body == "topside" else np.eye(4)) @ m.T_body_marker
+                pc = (T[:3, :3] @ marker_object_points(the_rig.marker_size).T).T + T[:3, 3]
+                if -(T[:3, :3] @ np.array([0.0, 0.0, 1.0])) @ (T[:3, 3] / np.linalg.norm(T[:3, 3])) < OBLIQUE_COS:
+                    continue
+                px = camera.project(pc) + persistent[name, m.id] + rng.normal(0.0, 0.1, (4, 2))
+                poses[m.id] = estimate_pose(MarkerDetection(m.id, px), camera, the_rig.marker_size)
+            o = observe_bodies(geometry, poses, camera, name, float(t), the_rig.marker_size)
+            if o is not None:
+                out.append(o)
+    return sorted(out, key=lambda o: o.time)
+
+
+def test_the_smoother_shows_no_more_than_the_live_filter_with_markers_at_one_cone() -> None:
+    """Markers at cone A only, 40 m from their cameras: the other cones rest on the topside's rotation from two markers
+    1.6 m apart. The smoother shows a cone only where the live filter did then, and within the live filter's σ. Its own
+    σ counted the frames after a step as independent of those before, which share each view's persistent errors: it
+    showed B and C 14 % of the time where the live filter showed them 1 %."""
+    the_rig = one_cone_rig()
+    obs = one_cone_observations(the_rig, 40.0)
+    live = {(e.time, e.cone): e for e in fused_estimates(the_rig, obs)}
+    smoothed = list(smoothed_estimates(the_rig, obs))
+    assert [(e.time, e.cone) for e in smoothed] == list(live)
+    for cone in "ABCD":
+        rows = [e for e in smoothed if e.cone == cone]
+        shown = [e for e in rows if np.isfinite(e.offset).all()]
+        assert all(np.isfinite(live[e.time, cone].offset).all() for e in shown)  # withheld where the live filter was
+        assert all(np.array_equal(e.covariance, live[e.time, cone].covariance) for e in rows)
+        if shown:
+            err = np.array([e.offset - (one_cone_topside_T(e.time)[:3, :3] @ CONES[cone] + one_cone_topside_T(e.time)
+                                        [:3, 3] - CONES[cone]) for e in shown])
+            z = np.abs(err) / np.array([np.sqrt(np.diag(e.covariance)) for e in shown])
+            assert np.mean(z <= 2) >= 0.9 and np.mean(z > 3) <= 0.02, cone  # as the live filter's: with 2 of 6
+            # other draws of the persistent errors it holds only 77-83 % within 2σ at A or D (its model renews them)
+    shown_a = np.mean([np.isfinite(e.offset).all() for e in smoothed if e.cone == "A" and e.time > REPORT_WARMUP_S])
+    assert shown_a > 0.95  # the watched cone is shown
