@@ -57,6 +57,12 @@ FACE_NORMALS: dict[str, tuple[float, float, float]] = {
 }
 UP = np.array([0.0, 0.0, 1.0])
 MATED_TOLERANCE_M = 0.005
+# Defaults of the rig's optional drawing fields (a ~10,000 t topside on a four-legged jacket, as the simulator has it)
+DEFAULT_LEG_DIAMETER_M = 2.0  # when no marker tells the leg's surface
+DEFAULT_LEG_LENGTH_M = 20.0
+DEFAULT_TOPSIDE_LEG_LENGTH_M = 8.0
+DEFAULT_CONE_HEIGHT_M = 1.5
+PLATE_STANDOFF_M = 0.1  # a marker's plate face stands this far proud of its leg's surface
 
 
 def normal_rotation(normal: np.ndarray) -> np.ndarray:
@@ -147,6 +153,15 @@ class Rig(_Model):
     markers: list[Marker]
     pairs: list[Pair] = Field(default_factory=list)
     cameras: list[CameraEntry] = Field(default_factory=list)
+    # Drawing only (the viewer's 3-D installation; the tracker never reads them), m. Unset: the leg diameter from
+    # the markers (their plates sit PLATE_STANDOFF_M proud of the leg), the lengths and the cone height below.
+    leg_diameter: Annotated[float | None, BeforeValidator(_number), Field(gt=0, le=MAX_MARKER_SIZE_M)] = None
+    leg_length: Annotated[float | None, BeforeValidator(_number), Field(gt=0, le=MAX_COORDINATE_M)] = None  # jacket
+    # leg drawn below its cone (default DEFAULT_LEG_LENGTH_M)
+    topside_leg_length: Annotated[float | None, BeforeValidator(_number), Field(gt=0, le=MAX_COORDINATE_M)] = None
+    # topside leg from its bottom (at the cone tip when mated) to the deck (default DEFAULT_TOPSIDE_LEG_LENGTH_M)
+    cone_height: Annotated[float | None, BeforeValidator(_number), Field(gt=0, le=MAX_MARKER_SIZE_M)] = None
+    # stabbing cone from its base on the leg top to its tip (default DEFAULT_CONE_HEIGHT_M)
     path: Path = Field(default=Path("rig.yaml"), exclude=True)  # the file it was read from
     warnings: tuple[str, ...] = Field(default=(), exclude=True)  # one line each, set by load_rig, for the CLI to print
 
