@@ -493,7 +493,7 @@ class Archive:
     def __init__(self, path: Path, rig: Rig, inputs: ArchiveInputs, cameras: Mapping[str, CameraModel],
                  info: Mapping[str, str] | None = None, truth: list[tuple[int, str, np.ndarray]] | None = None,
                  key: Ed25519PrivateKey | None = None, chunk_size: int = CHUNK_SIZE, block_s: float = BLOCK_S,
-                 video: str = "jpeg") -> None:
+                 video: str = "jpeg", file: ArchiveFile | None = None) -> None:
         if video not in VIDEO_FORMATS:
             raise ValueError(f"video format {video!r} (expected one of {', '.join(VIDEO_FORMATS)})")
         self.video = video
@@ -503,7 +503,8 @@ class Archive:
         self.inputs = inputs
         self.cameras = dict(cameras)
         self.key = key
-        self.file = ArchiveFile(path, chunk_size=chunk_size, block_s=block_s, key=key)
+        # file: where the messages go (default: an MCAP file at path); viewer/foxglove_live.py streams them instead
+        self.file = file if file is not None else ArchiveFile(path, chunk_size=chunk_size, block_s=block_s, key=key)
         self.file.metadata("topside", {
             "installation": rig.name, **{k: v for k, v in (info or {}).items() if v},
             "software_version": inputs.software_version, "software_commit": inputs.software_commit,
