@@ -477,20 +477,41 @@ def live(
                                                    callback=_finite(0.0))] = None,
     layout: Annotated[str, typer.Option(help="Layout stored in the recording: superintendent or analysis.")
                       ] = "superintendent",
+    viewer_scope: Annotated[str, typer.Option(help="What the viewer (--web, --spawn) of the superintendent's layout "
+                                                   "gets: superintendent (what it shows) or all (everything "
+                                                   "recorded).")] = "superintendent",
+    web_port: Annotated[int, typer.Option(help="Port of the web viewer's page (with --web).", min=1, max=65535)
+                        ] = 9090,
+    grpc_port: Annotated[int, typer.Option(help="Port of the viewer's gRPC server (--web, --spawn).", min=1,
+                                           max=65535)] = 9876,
+    foxglove: Annotated[bool, typer.Option("--foxglove", help="Stream the archive's channels to Foxglove (a "
+                                                              "WebSocket server, ws://<bind>:<port>).")] = False,
+    port: Annotated[int, typer.Option("--port", help="Port of the Foxglove WebSocket server (with --foxglove).",
+                                      min=1, max=65535)] = 8765,
 ) -> None:
-    """Track every camera live, fuse them, record, and stream to the superintendent's view."""
+    """Track every camera live, fuse them, record, and stream to the superintendent's view (and Foxglove)."""
     import time
 
     from tracking.live import LiveTracker
     from tracking.report import OffsetsWriter
     from tracking.rig import load_rig
-    from viewer.playback import resolve_bind, start_live_viewer, stop_viewer, web_viewer_url
-    from viewer.session import Recorder
+    from viewer.playback import (
+        check_port_free,
+        resolve_bind,
+        start_live_viewer,
+        stop_viewer,
+        url_host,
+        warn_if_exposed,
+        web_viewer_url,
+    )
+    from viewer.session import VIEWER_SCOPES, Recorder
 
     if spawn and web:
         raise InputError("--spawn/--web", "choose one viewer")
     if layout not in ("superintendent", "analysis"):
         raise InputError("--layout", f"{layout!r} is not a layout (expected superintendent or analysis)")
+    if viewer_scope not in VIEWER_SCOPES:
+        raise InputError("--viewer-scope", f"{viewer_scope!r} is not a scope (expected {' or '.join(VIEWER_SCOPES)})")
     the_rig = load_rig(rig)
     _warn_rig(the_rig)
     rrd = rrd or Path("recordings") / f"live-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
@@ -501,9 +522,18 @@ def live(
         if path.exists():
             raise InputError(path, "exists (an earlier session's record; a live session never overwrites one): "
                                    "expected another name", option)
-    viewer_url, viewer_process = start_live_viewer(web, bind) if (spawn or web) else (None, None)
+    fox_address = resolve_bind(bind) if foxglove else None
+    if fox_address is not None:
+        check_port_free(fox_address, port, "--port")
+    if spawn or web:
+        check_port_free(resolve_bind(bind), grpc_port, "--grpc-port")
     if web:
-        console.print(f"web viewer: {web_viewer_url(resolve_bind(bind))}")
+        check_port_free(resolve_bind(bind), web_port, "--web-port")
+    viewer_url, viewer_process = (start_live_viewer(web, bind, grpc_port, web_port) if (spawn or web)
+                                  else (None, None))
+    if web:
+        console.print(f"web viewer: {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}")
+    fox = None
     outputs = Outputs()  # every end (done, Ctrl-C, SIGTERM, a failure) keeps what was recorded, under its name
     writer: OffsetsWriter | None = None
     recorder: Recorder | None = None
@@ -521,8 +551,16 @@ def live(
                     return
 
     try:
+        if fox_address is not None:
+            from viewer.foxglove_live import FoxgloveStream
+
+            if not (spawn or web):  # the viewers warn for themselves
+                warn_if_exposed(fox_address)
+            fox = FoxgloveStream(the_rig, fox_address, port)
+            console.print(f"foxglove: ws://{url_host(fox_address)}:{fox.port}", markup=False)
         recorder = Recorder(the_rig, rrd, viewer=viewer_url, segment_s=segment_minutes * 60, stale_s=stale,
-                            layout=layout, estimate_period_s=LIVE_ESTIMATE_PERIOD_S)
+                            layout=layout, estimate_period_s=LIVE_ESTIMATE_PERIOD_S, viewer_scope=viewer_scope,
+                            forward=[fox] if fox is not None else [])
         with OffsetsWriter(outputs.claim(out)) as writer:
             console.print(f"recording to {rrd.with_name(rrd.stem + '-*.rrd')} and {writer.path} (renamed {out.name} "
                           "when the session ends)", markup=False, soft_wrap=True)
@@ -540,6 +578,8 @@ def live(
             outputs.commit()  # what was measured is the record of the lift, however the session ended
             if viewer_process is not None:  # the viewers the tool starts end with it
                 stop_viewer(viewer_process)
+            if fox is not None:
+                fox.close()
     console.print(f"wrote {writer.rows if writer else 0} rows to {out}; recording {rrd.with_name(rrd.stem + '-*.rrd')}")
 
 
