@@ -9,7 +9,8 @@ from rerun import bindings
 
 from tracking.rig import Rig
 
-EYE_OFFSET_M = np.array([-25.0, -45.0, 20.0])  # default 3-D eye: from ahead, starboard and above the cones
+EYE_OFFSET_M = np.array([-18.0, -44.0, 3.0])  # default 3-D eye: from ahead and starboard, under the deck (as the stern
+# cameras see the cones)
 HEALTH_SERIES = {"markers": "markers found", "reprojection_error_px": "reprojection [px]",
                  "frame_age_s": "frame age [s]"}
 AXIS_TITLES = {"dx": "Δx (to port) [m]", "dy": "Δy (astern) [m]", "dz": "Δz (up) [m]"}

@@ -38,7 +38,7 @@ JPEG_QUALITY = 80
 TOLERANCE_M = 0.150  # concentricity requirement (paper, section I-D)
 MARKER_THICKNESS_M = 0.01
 AXIS_LENGTH_M = 0.5
-FRUSTUM_DEPTH_M = 2.0
+FRUSTUM_DEPTH_M = 5.0  # a frustum this deep shows its camera's image at installation scale (cameras 10-50 m off)
 FILTER_CAMERAS = "world/filter/cameras"  # where the fused filter has each camera (the frames' own are world/cameras)
 TRUTH_CAMERAS = "world/truth/cameras"  # where a truth log (the simulator's) has each camera
 TRUTH_POSE_AXES = ("x", "y", "z", "rx", "ry", "rz")  # a truth log's camera_<name>_<axis> columns (the simulator's
@@ -158,6 +158,23 @@ def camera_pose_from_markers(rig: Rig, result: FrameResult) -> np.ndarray | None
 def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: FrameResult,
               show_rejected: bool = False, jpeg_quality: int = JPEG_QUALITY) -> None:
     """One camera frame: image, corners, reprojected axes, camera pose, estimated marker frames."""
+    log_frame_image(rec, rig, camera, result, show_rejected, jpeg_quality)
+    if not result.tracked:  # recorded only, to keep up: its overlays stay as they were
+        return
+    name = result.camera
+    base = f"world/cameras/{name}"
+    T_jacket_camera = camera_pose_from_markers(rig, result)
+    if T_jacket_camera is not None:
+        rr.log(base, rr.Transform3D(translation=T_jacket_camera[:3, 3], mat3x3=T_jacket_camera[:3, :3]),
+               recording=rec)
+        log_marker_frames(rec, f"world/estimated/{name}", rig.marker_size,
+                          {mid: T_jacket_camera @ pose.T_camera_marker for mid, pose in result.poses.items()},
+                          [CHOICE_COLORS[pose.choice] for pose in result.poses.values()])
+
+
+def log_frame_image(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: FrameResult,
+                    show_rejected: bool = False, jpeg_quality: int = JPEG_QUALITY) -> None:
+    """One camera frame in 2-D, at its capture time: image, marker outlines, corners, reprojected axes."""
     name = result.camera
     set_capture_time(rec, result.time)
     rr.set_time(f"frame_{name}", sequence=result.frame.index, recording=rec)
@@ -180,13 +197,6 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
         rr.log(f"{base}/image/rejected", rr.LineStrips2D(
             [np.vstack([c, c[:1]]) for c in result.detections.rejected], colors=REJECTED_COLOR, radii=0.5),
             recording=rec)
-    T_jacket_camera = camera_pose_from_markers(rig, result)
-    if T_jacket_camera is not None:
-        rr.log(base, rr.Transform3D(translation=T_jacket_camera[:3, 3], mat3x3=T_jacket_camera[:3, :3]),
-               recording=rec)
-        log_marker_frames(rec, f"world/estimated/{name}", rig.marker_size,
-                          {mid: T_jacket_camera @ pose.T_camera_marker for mid, pose in result.poses.items()},
-                          [CHOICE_COLORS[pose.choice] for pose in result.poses.values()])
 
 
 def log_health(rec: rr.RecordingStream, result: FrameResult) -> None:

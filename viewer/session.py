@@ -8,9 +8,10 @@ import os
 import subprocess
 import sys
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import pandas as pd
@@ -29,6 +30,7 @@ from tracking.pipeline import FrameResult
 from tracking.rig import Rig
 from viewer.archive import ArchiveInputs
 from viewer.blueprint import LayoutSender, analysis_blueprint
+from viewer.installation import log_concentricity, log_installation, log_true_topside, true_topside_poses
 from viewer.playback import rerun_binary, rerun_env
 from viewer.recording import (
     APP_ID,
@@ -41,6 +43,7 @@ from viewer.recording import (
     log_estimates,
     log_frame,
     log_frame_ages,
+    log_frame_image,
     log_frustum,
     log_health,
     log_image,
@@ -71,6 +74,15 @@ BACKLOG_PERIOD_S = 2.0  # every this much capture time the logger waits for its 
 BACKLOG_TIMEOUT_S = 0.5  # ... but at most this long: a slow viewer must not stall the live loop
 CLOSE_TIMEOUT_S = 10.0  # at the end, a live viewer is waited for this long at most
 BACKLOG_MAX_PERIOD_S = 60.0  # after timeouts the period doubles up to this (a dead viewer costs < 1 % of the time)
+VIEWER_SCOPES = ("superintendent", "all")  # what a live viewer of the superintendent's layout is sent
+
+
+class Sink(Protocol):
+    """What takes the tracker's stream besides the recording (viewer/archive.py's ArchiveSink, the Foxglove stream)."""
+
+    def on_frame(self, result: FrameResult) -> None: ...
+
+    def on_estimate(self, estimate: ConeEstimate) -> None: ...
 
 
 class Compactor:
@@ -125,18 +137,24 @@ class Recorder:
 
     rrd: file to write; with segment_s, a new file <stem>-NNN.rrd every segment_s of capture time, listed in
     <stem>.segments.csv, with the layout in <stem>.rbl. viewer: gRPC URL of a viewer to stream to as well (live).
+    viewer_scope: with the superintendent's layout, "superintendent" sends the viewer only what that layout shows
+    (its figures, and the images of the cameras it shows) through a stream of its own, so a tablet keeps up and opens
+    at once; "all" sends it everything the file gets. forward: more sinks (on_frame, on_estimate) that get every
+    frame and estimate as they come, unthrottled (the live Foxglove stream, viewer/foxglove_live.py).
     """
 
     def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
                  show_rejected: bool = False, recording_id: str | None = None,
                  jpeg_quality: int = JPEG_QUALITY, viewer: str | None = None, segment_s: float | None = None,
                  stale_s: float = STALE_S, layout: str = "analysis",
-                 options: Mapping[str, str] | None = None, estimate_period_s: float = 0.0) -> None:
+                 options: Mapping[str, str] | None = None, estimate_period_s: float = 0.0,
+                 viewer_scope: str = "superintendent", forward: Sequence[Sink] = ()) -> None:
         self.rig = rig
         self.truth = truth
         self.show_rejected = show_rejected
         self.jpeg_quality = jpeg_quality
         self.stale_s = stale_s
+        self.forward = list(forward)
         self.estimate_period_s = estimate_period_s  # live: a cone's estimates are recorded at most this often
         self._estimate_logged: dict[str, float] = {}
         self._inputs = ArchiveInputs.from_rig(rig, options or {}).to_json()  # for `topside export`
@@ -170,6 +188,15 @@ class Recorder:
         self._drain_period = BACKLOG_PERIOD_S
         self.backlog_timeouts = 0  # waits for the sinks that ran out of time
         self._layout: Path | None = None  # segmented: the stored blueprint, merged into each segment when compacted
+        self._view: rr.RecordingStream | None = None  # the viewer's own stream (superintendent scope), else None
+        self._shown: set[str] = set()  # cameras whose images the viewer's own stream carries
+        if viewer is not None and layout == "superintendent" and viewer_scope == "superintendent":
+            self._view = rr.RecordingStream(APP_ID, recording_id=self.rec.get_recording_id(),
+                                            batcher_config=rr.ChunkBatcherConfig(flush_tick=BATCH_TICK_S,
+                                                                                 flush_num_bytes=BATCH_BYTES))
+            self._view.set_sinks(rr.GrpcSink(viewer), default_blueprint=self._stored_blueprint())
+            for cone in self.cones:
+                log_target_circle(self._view, cone)
         if self._rrd is not None:
             self._rrd.parent.mkdir(parents=True, exist_ok=True)
             if segment_s:
@@ -201,7 +228,7 @@ class Recorder:
         # A footer indexes every chunk, held in memory until the file closes (~5 kB a chunk, ~140 chunks/s live):
         # segments are written without one, and the compactor (`rerun rrd optimize`) adds it once closed.
         sinks: list = [rr.FileSink(path, write_footer=not self._segment_s)] if path is not None else []
-        if self._viewer is not None:
+        if self._viewer is not None and self._view is None:
             sinks.append(rr.GrpcSink(self._viewer))
         if sinks:
             # rerun-sdk 0.41 never frees the stream a blueprint is built in (~0.7-2.4 MB each): over six hours of
@@ -212,6 +239,7 @@ class Recorder:
         if path is not None:
             self._segments.append([path.name, None, None])
         log_rig(self.rec, self.rig)
+        log_installation(self.rec, self.rig)
         log_archive_inputs(self.rec, self._inputs)
         for name, cam in self.cameras.items():
             log_frustum(self.rec, f"world/cameras/{name}", cam)  # where its frames' images and marker poses go
@@ -224,6 +252,7 @@ class Recorder:
         if self.truth is not None and len(self._segments) <= 1:
             log_truth(self.rec, self.truth, self.cones)
             log_true_cameras(self.rec, self.truth, self.cameras)
+            log_true_topside(self.rec, self.rig, *true_topside_poses(self.truth, self._cone_points))
 
     def _rotate_if_due(self, t: float) -> None:
         """Start the next segment file when this one spans segment_s; it opens with every camera's current GOP."""
@@ -268,6 +297,8 @@ class Recorder:
 
     def on_frame(self, result: FrameResult) -> None:
         """Log one processed frame."""
+        for sink in self.forward:
+            sink.on_frame(result)
         self._rotate_if_due(result.time)
         self._note_time(result.time)
         if result.frame.packet is not None and result.camera not in self._video:
@@ -279,6 +310,8 @@ class Recorder:
                 gop.clear()
             gop.append(replace(result.frame, gray=None, bgr=None))  # the packet is all a segment needs
         log_frame(self.rec, self.rig, self.cameras[result.camera], result, self.show_rejected, self.jpeg_quality)
+        if self._view is not None and result.camera in self._shown:
+            log_frame_image(self._view, self.rig, self.cameras[result.camera], result, jpeg_quality=self.jpeg_quality)
         self.status.frames[result.camera] = self.status.frames.get(result.camera, 0) + 1
         self.status.markers[result.camera] = self.status.markers.get(result.camera, 0) + len(result.poses)
         self._last_time = max(self._last_time, result.time)
@@ -299,7 +332,8 @@ class Recorder:
         saturated, rerun's writer otherwise falls behind and its queue grows by the whole segment. A sink that
         keeps timing out (a live viewer gone) is waited for ever more rarely, so it cannot slow the tracking."""
         try:
-            self.rec.flush(timeout_sec=BACKLOG_TIMEOUT_S)
+            for stream in self._streams():
+                stream.flush(timeout_sec=BACKLOG_TIMEOUT_S)
             self._drain_period = BACKLOG_PERIOD_S
         except RuntimeError:  # "Flush timed out": the data stays queued and goes out with the next one
             self.backlog_timeouts += 1
@@ -307,6 +341,8 @@ class Recorder:
 
     def on_estimate(self, estimate: ConeEstimate) -> None:
         """Take one cone estimate: sent with the others of its FLUSH_S; the status panel when due."""
+        for sink in self.forward:
+            sink.on_estimate(estimate)
         if estimate.time - self._estimate_logged.get(estimate.cone, -np.inf) >= self.estimate_period_s:
             self._estimate_logged[estimate.cone] = estimate.time
             self._estimates.append(estimate)
@@ -328,6 +364,7 @@ class Recorder:
                 truth[rows] = truth_at(self.truth, cone, np.array([batch[i].time for i in rows]))
         log_estimates(self.rec, batch, truth)
         log_estimate_records(self.rec, batch)
+        log_concentricity(self.rec, self._cone_points, batch)
         full: dict[float, dict[str, np.ndarray]] = {}
         for e in batch:
             if np.all(np.isfinite(e.offset)):
@@ -368,9 +405,30 @@ class Recorder:
         for cone in self.cones:
             reading = cone_reading(self.status.latest.get(cone), cone, update.now, update.last_measurement,
                                    self.stale_s)
-            log_cone_reading(self.rec, reading, update.now)
-        log_camera_health(self.rec, update.cameras, update.now)
+            for stream in self._streams():
+                log_cone_reading(stream, reading, update.now, self.stale_s)
+        for stream in self._streams():
+            log_camera_health(stream, update.cameras, update.now)
         self._send_layout_if_changed(update.now)
+
+    def _streams(self) -> list[rr.RecordingStream]:
+        """The file's stream, and the viewer's own when it has one."""
+        return [self.rec] if self._view is None else [self.rec, self._view]
+
+    def _show_cameras(self, cameras: set[str]) -> None:
+        """The viewer's own stream carries these cameras' images from now on; a newly shown camera's start with the
+        packets since its newest keyframe, so its video decodes at once."""
+        if self._view is None:
+            return
+        for name in sorted(cameras - self._shown):
+            log_frustum(self._view, f"world/cameras/{name}", self.cameras[name])
+            if name in self._video:
+                log_video_codec(self._view, name)
+            for frame in self._gop.get(name, []):
+                set_capture_time(self._view, frame.time)
+                rr.set_time(f"frame_{name}", sequence=frame.index, recording=self._view)
+                log_image(self._view, f"world/cameras/{name}/image", frame, self.jpeg_quality)
+        self._shown = set(cameras)
 
     def cone_cameras(self) -> dict[str, str]:
         """The camera that measured each cone most often."""
@@ -387,7 +445,9 @@ class Recorder:
         if first or (mapping != self._cone_cameras and (not self._cone_cameras
                                                          or now - self._blueprint_sent >= BLUEPRINT_MIN_PERIOD_S)):
             self._layouts = self._layouts or LayoutSender(APP_ID)
-            self._layouts.send(self.rec, superintendent_blueprint(self.rig, mapping))
+            self._show_cameras(set(mapping.values()))
+            for stream in self._streams():
+                self._layouts.send(stream, superintendent_blueprint(self.rig, mapping))
             self._cone_cameras = mapping
             self._blueprint_sent = now
 
@@ -398,11 +458,15 @@ class Recorder:
         if self._last_update is not None:
             self._log_board(self._last_update)
         try:
-            self.rec.flush(timeout_sec=CLOSE_TIMEOUT_S if self._viewer else 1e38)
+            self.rec.flush(timeout_sec=CLOSE_TIMEOUT_S if self._viewer and self._view is None else 1e38)
+            if self._view is not None:
+                self._view.flush(timeout_sec=CLOSE_TIMEOUT_S)
         except RuntimeError:  # only a live viewer that is gone can time out; the file sink has taken everything
             print(f"warning: the live viewer at {self._viewer} did not take the last data; the recording is "
                   "complete", file=sys.stderr)
         self.rec.disconnect()
+        if self._view is not None:
+            self._view.disconnect()
         if self._rrd is None:
             return
         if self._segment_s:

@@ -1,9 +1,18 @@
-"""The superintendent's live view: per cone the offset in large figures, green/amber/red, NO DATA when stale.
+"""The superintendent's live view: per cone the offset in large figures, green/amber/red, NO DATA (grey) with why.
 
+Every cone gets the same column, observed or not: figures, live image, bull's-eye, 60-s trend.
 Entity layout:
-    superintendent/cones/<cone>          markdown: state, concentricity and Δx Δy Δz in large figures
-    superintendent/targets/<cone>        bull's-eye: the ±150 mm circle and the cone's horizontal offset (mm)
-    superintendent/cameras               markdown: every camera's state, frame rate, age and markers
+    superintendent/cones/<cone>              markdown: state, concentricity ± 2σ and Δx Δy Δz in large figures
+    superintendent/targets/<cone>            bull's-eye in mm, as seen from the vessel's stern facing the jacket:
+                                             port to the right, astern (away from the vessel) up
+        .../tolerance, .../compass           the ±150 mm circle and cross, the port/astern words (static)
+        .../state                            the ring in the cone's state colour (grey: NO DATA)
+        .../offset                           the cone's point (its radius is 2σ); beyond the ring, drawn on the ring
+        .../beyond                           ... with an arrow pointing the way and the distance
+        .../why                              NO DATA: the reason, in the middle
+    superintendent/trend/<cone>/{concentricity,bound,tolerance}   the last minute's concentricity, r + 2σ, 150 (mm)
+    superintendent/no_camera/<cone>          markdown in the image's place until a camera has measured the cone
+    superintendent/cameras                   markdown: every camera's state, frame rate, age and markers
 The live image per cone is the 2-D view of the camera that measures that cone most.
 """
 
@@ -22,16 +31,28 @@ from tracking.fusion import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_S
 from tracking.live import STALE_S, CameraHealth
 from tracking.rig import Rig
 from tracking.sources import CameraState
-from viewer.recording import TOLERANCE_M, concentricity, set_capture_time
+from viewer.recording import TIMELINE, TOLERANCE_M, concentricity, set_capture_time
 
 ROOT = "superintendent"
 CONFIDENCE_SIGMAS = 2.0  # amber when the offset is inside the tolerance but its 2σ bound is not
-CIRCLE_POINTS = 73
-TARGET_REACH = 1.3  # the bull's-eye shows offsets up to this many tolerances; beyond, the point sits on its rim
-TARGET_COLORS = {"green": (40, 200, 80), "amber": (255, 170, 0), "red": (230, 40, 40), "none": (128, 128, 128)}
-# Words, not emoji: the viewer's font (Inter) has no emoji, and a missing glyph makes the native viewer panic.
+CIRCLE_POINTS = 97
+TOLERANCE_MM = TOLERANCE_M * 1000
+TARGET_REACH = 1.6  # the bull's-eye spans this many tolerances each way: room for the arrow beyond the ring
+ARROW_MM = 0.35 * TOLERANCE_MM  # a cone beyond the ring: an arrow this long from its point on the ring
+MIN_DOT_MM = 8.0  # the cone's dot is its 2σ, but never smaller than this
+STATE_RING_PX = 3.0  # the state ring's half-width, UI points (the same on every screen)
+TREND_S = 60.0
+WHY_Y_MM = 0.5 * TOLERANCE_MM  # NO DATA's reason: inside the ring, below its centre (clear of the compass words)
+NOWHERE = np.zeros((0, 2))  # an empty batch: the part is gone from the view from this time on
+TARGET_COLORS = {"green": (40, 200, 80), "amber": (255, 170, 0), "red": (230, 40, 40), "none": (140, 140, 140)}
+RING_COLOR = (200, 200, 200)
+TOLERANCE_LINE_COLOR = (230, 40, 40)
+BOUND_COLOR = (150, 150, 150)
+TREND_COLOR = (40, 120, 230)  # reads on the web viewer's light theme and the native viewer's dark one
+# Words, not emoji or arrows: the viewer's font (Inter) lacks them, and a missing glyph makes the native viewer panic.
 CAMERA_WORDS = {CameraState.STARTING: "starting", CameraState.LIVE: "LIVE", CameraState.FROZEN: "FROZEN",
                 CameraState.LOST: "LOST", CameraState.ENDED: "ended"}
+ROW_SHARES = [3, 3, 4, 2]  # figures, image, bull's-eye, trend: the same in every column
 
 
 class ConeState(StrEnum):
@@ -81,25 +102,30 @@ def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_meas
     return ConeReading(cone, state, r, sigma, estimate.offset, age, estimate.cameras)
 
 
+def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool = False) -> str:
+    """Why a cone shows NO DATA (short: a few words, for the bull's-eye)."""
+    if not np.isfinite(reading.age):
+        return "no measurement yet"
+    if reading.age > stale_s:
+        return (f"newest {reading.age:.1f} s old" if short
+                else f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)")
+    if short:
+        return f"σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm"
+    return ("the cameras do not see this cone well enough (1σ above "
+            f"{REPORT_MAX_SIGMA_M * 1e3:.0f} mm; {REPORT_WARMUP_SIGMA_M * 1e3:.0f} mm in the first "
+            f"{REPORT_WARMUP_S:g} s after the topside is placed)")
+
+
 def cone_markdown(reading: ConeReading, stale_s: float = STALE_S) -> str:
-    """Large figures for one cone."""
-    headline = f"# Cone {reading.cone}: {HEADLINES[reading.state]}"
+    """Large figures for one cone (three lines: they fit a tablet's column); NO DATA says why."""
     if reading.state == ConeState.NO_DATA:
-        if not np.isfinite(reading.age):
-            why = "no measurement yet"
-        elif reading.age > stale_s:
-            why = f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)"
-        else:
-            why = ("the cameras do not see this cone well enough (1σ above "
-                   f"{REPORT_MAX_SIGMA_M * 1e3:.0f} mm; {REPORT_WARMUP_SIGMA_M * 1e3:.0f} mm in the first "
-                   f"{REPORT_WARMUP_S:g} s after the topside is placed)")
-        return f"{headline}\n# NO DATA\n\n{why}"
+        return f"# {reading.cone}: NO DATA\n\n{no_data_reason(reading, stale_s)}"
     dx, dy, dz = reading.offset
-    return (f"{headline}\n"
-            f"# {reading.concentricity * 1000:.0f} mm\n"
-            f"## ±{CONFIDENCE_SIGMAS * reading.sigma * 1000:.0f} mm (2σ) of {TOLERANCE_M * 1000:.0f}\n\n"
-            f"### Δx {dx * 1000:+.0f} · Δy {dy * 1000:+.0f} · Δz {dz * 1000:+.0f} mm\n\n"
-            f"rests on {', '.join(reading.cameras) or 'the filter alone'} · {reading.age:.2f} s old")
+    return (f"# {reading.cone}: {reading.concentricity * 1000:.0f} mm\n\n"
+            f"**{HEADLINES[reading.state]}** · ±{CONFIDENCE_SIGMAS * reading.sigma * 1000:.0f} mm (2σ) of "
+            f"{TOLERANCE_MM:.0f}\n\n"
+            f"Δx {dx * 1000:+.0f} · Δy {dy * 1000:+.0f} · Δz {dz * 1000:+.0f} mm · "
+            f"{', '.join(reading.cameras) or 'the filter alone'} · {reading.age:.2f} s old")
 
 
 def cameras_markdown(cameras: Mapping[str, CameraHealth], now: float) -> str:
@@ -112,30 +138,76 @@ def cameras_markdown(cameras: Mapping[str, CameraHealth], now: float) -> str:
     return "\n".join(lines)
 
 
-def log_target_circle(rec: rr.RecordingStream, cone: str) -> None:
-    """Static ±tolerance circle and cross of a cone's bull's-eye, in mm."""
+def screen_xy(offset_m: np.ndarray) -> np.ndarray:
+    """A horizontal offset (dx, dy) in m as bull's-eye coordinates in mm (2-D views have y down): port to the right,
+    astern up, as the superintendent on the stern sees the jacket."""
+    return np.array([offset_m[0], -offset_m[1]]) * 1000
+
+
+def circle(radius: float) -> np.ndarray:
+    """(CIRCLE_POINTS, 2) closed circle about the origin."""
     a = np.linspace(0, 2 * np.pi, CIRCLE_POINTS)
-    r = TOLERANCE_M * 1000
-    rr.log(f"{ROOT}/targets/{cone}/tolerance", rr.LineStrips2D(
-        [np.c_[r * np.cos(a), r * np.sin(a)], [[-r, 0], [r, 0]], [[0, -r], [0, r]]],
-        colors=(200, 200, 200), radii=1.0), static=True, recording=rec)
+    return np.c_[radius * np.cos(a), radius * np.sin(a)]
 
 
-def log_cone_reading(rec: rr.RecordingStream, reading: ConeReading, now: float) -> None:
-    """One cone's large figures and its point on the bull's-eye (x to port right, astern down)."""
+def log_target_circle(rec: rr.RecordingStream, cone: str) -> None:
+    """Static parts of a cone's bull's-eye, in mm: the ±tolerance circle and cross, the directions, the trend's
+    series styles, and (until a camera measures the cone) the note in its image's place."""
+    r = TOLERANCE_MM
+    base = f"{ROOT}/targets/{cone}"
+    rr.log(f"{base}/tolerance", rr.LineStrips2D([circle(r), [[-r, 0], [r, 0]], [[0, -r], [0, r]]],
+                                                colors=RING_COLOR, radii=1.0), static=True, recording=rec)
+    reach = TARGET_REACH * r
+    rr.log(f"{base}/compass", rr.Points2D([[0.85 * reach, 0], [0, -0.9 * reach]], radii=0.5, colors=RING_COLOR,
+                                          labels=["port", "astern"]), static=True, recording=rec)
+    trend = f"{ROOT}/trend/{cone}"
+    for name, color, width, label in (("concentricity", TREND_COLOR, 2.5, "concentricity [mm]"),
+                                      ("bound", BOUND_COLOR, 1.0, "+2σ [mm]"),
+                                      ("tolerance", TOLERANCE_LINE_COLOR, 1.5, f"{TOLERANCE_MM:.0f} mm")):
+        rr.log(f"{trend}/{name}", rr.SeriesLines(colors=color, widths=width, names=label), static=True, recording=rec)
+    rr.log(f"{ROOT}/no_camera/{cone}", rr.TextDocument(
+        f"No camera has measured cone {cone}'s markers yet: its image appears here when one does.",
+        media_type=rr.MediaType.MARKDOWN), static=True, recording=rec)
+
+
+def log_cone_reading(rec: rr.RecordingStream, reading: ConeReading, now: float, stale_s: float = STALE_S) -> None:
+    """One cone's large figures, its bull's-eye (a point beyond the ring is drawn on it, with an arrow and its
+    distance) and its trend."""
     set_capture_time(rec, now)
-    rr.log(f"{ROOT}/cones/{reading.cone}", rr.TextDocument(cone_markdown(reading), media_type=rr.MediaType.MARKDOWN),
+    cone = reading.cone
+    rr.log(f"{ROOT}/cones/{cone}", rr.TextDocument(cone_markdown(reading, stale_s), media_type=rr.MediaType.MARKDOWN),
            recording=rec)
-    point = f"{ROOT}/targets/{reading.cone}/offset"
+    base = f"{ROOT}/targets/{cone}"
+    color = TARGET_COLORS[reading.state.value]
+    rr.log(f"{base}/state", rr.LineStrips2D([circle(TOLERANCE_MM)], colors=color,
+                                            radii=rr.components.Radius.ui_points(STATE_RING_PX)), recording=rec)
+    trend = f"{ROOT}/trend/{cone}"
+    rr.log(f"{trend}/tolerance", rr.Scalars(TOLERANCE_MM), recording=rec)
     if reading.state == ConeState.NO_DATA:
-        rr.log(point, rr.Clear(recursive=False), recording=rec)
+        rr.log(f"{base}/offset", rr.Points2D(NOWHERE), recording=rec)
+        rr.log(f"{base}/beyond", rr.Arrows2D(vectors=NOWHERE), recording=rec)
+        rr.log(f"{base}/why", rr.Points2D([[0.0, WHY_Y_MM]], radii=0.5, colors=color,
+                                          labels=[f"NO DATA: {no_data_reason(reading, stale_s, short=True)}"]),
+               recording=rec)
+        for part in ("concentricity", "bound"):  # a gap in the trend, not a line across the time without data
+            rr.log(f"{trend}/{part}", rr.Scalars(np.nan), recording=rec)
         return
-    xy = reading.offset[:2] * 1000
-    reach = TARGET_REACH * TOLERANCE_M * 1000
-    xy = xy if np.hypot(*xy) <= reach else xy * reach / np.hypot(*xy)  # far off: on the rim, pointing the way
-    rr.log(point, rr.Points2D([xy], radii=max(6.0, 2000 * reading.sigma),
-                              colors=TARGET_COLORS[reading.state.value],
-                              labels=[f"{reading.concentricity * 1000:.0f} mm"]), recording=rec)
+    rr.log(f"{base}/why", rr.Points2D(NOWHERE), recording=rec)
+    mm = reading.concentricity * 1000
+    xy = screen_xy(reading.offset[:2])
+    dot = max(MIN_DOT_MM, CONFIDENCE_SIGMAS * reading.sigma * 1000)
+    label = f"{mm:.0f} mm"
+    if mm > TOLERANCE_MM:  # beyond the ring: on the ring, with an arrow the way it is off
+        u = xy / np.hypot(*xy)
+        rr.log(f"{base}/offset", rr.Points2D([u * TOLERANCE_MM], radii=dot, colors=color), recording=rec)
+        rr.log(f"{base}/beyond", rr.Arrows2D(origins=[u * TOLERANCE_MM], vectors=[u * ARROW_MM], colors=color,
+                                             radii=rr.components.Radius.ui_points(2.5), labels=[label]),
+               recording=rec)
+    else:
+        rr.log(f"{base}/offset", rr.Points2D([xy], radii=dot, colors=color, labels=[label]), recording=rec)
+        rr.log(f"{base}/beyond", rr.Arrows2D(vectors=NOWHERE), recording=rec)
+    rr.log(f"{trend}/concentricity", rr.Scalars(mm), recording=rec)
+    rr.log(f"{trend}/bound", rr.Scalars(mm + CONFIDENCE_SIGMAS * reading.sigma * 1000), recording=rec)
 
 
 def log_camera_health(rec: rr.RecordingStream, cameras: Mapping[str, CameraHealth], now: float) -> None:
@@ -145,18 +217,29 @@ def log_camera_health(rec: rr.RecordingStream, cameras: Mapping[str, CameraHealt
            recording=rec)
 
 
+def cone_column(cone: str, camera: str | None) -> rrb.Vertical:
+    """One cone's column: figures, live image (or why there is none), bull's-eye, trend; the same sizes always."""
+    reach = TARGET_REACH * TOLERANCE_MM
+    image = (rrb.Spatial2DView(origin=f"world/cameras/{camera}", name=f"{cone}: {camera}") if camera is not None
+             else rrb.TextDocumentView(origin=f"{ROOT}/no_camera/{cone}", name=f"{cone}: no camera yet"))
+    return rrb.Vertical(
+        rrb.TextDocumentView(origin=f"{ROOT}/cones/{cone}", name=f"cone {cone}"),
+        image,
+        rrb.Spatial2DView(origin=f"{ROOT}/targets/{cone}", name=f"{cone} offset [mm]: port right, astern up",
+                          visual_bounds=rrb.VisualBounds2D(x_range=[-reach, reach], y_range=[-reach, reach])),
+        rrb.TimeSeriesView(origin=f"{ROOT}/trend/{cone}", name=f"{cone} concentricity, last minute [mm]",
+                           plot_legend=rrb.PlotLegend(visible=False),
+                           time_ranges=rrb.VisibleTimeRange(
+                               TIMELINE, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-TREND_S),
+                               end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0))),
+        row_shares=ROW_SHARES)
+
+
 def superintendent_blueprint(rig: Rig, cone_cameras: Mapping[str, str]) -> rrb.Blueprint:
-    """A column per cone (figures, live image, bull's-eye) above the camera table."""
+    """A column per cone (figures, live image, bull's-eye, trend) above the camera table."""
     cones = sorted(rig.cones) or sorted({p.cone for p in rig.all_pairs()})
-    columns = []
-    for cone in cones:
-        views: list = [rrb.TextDocumentView(origin=f"{ROOT}/cones/{cone}", name=f"cone {cone}")]
-        if cone in cone_cameras:
-            views.append(rrb.Spatial2DView(origin=f"world/cameras/{cone_cameras[cone]}",
-                                           name=f"{cone}: {cone_cameras[cone]}"))
-        views.append(rrb.Spatial2DView(origin=f"{ROOT}/targets/{cone}", name=f"{cone} Δx Δy [mm]"))
-        columns.append(rrb.Vertical(*views, row_shares=[2, 3, 2][:len(views)] if len(views) == 3 else [2, 2]))
+    columns = [cone_column(cone, cone_cameras.get(cone)) for cone in cones]
     return rrb.Blueprint(
         rrb.Vertical(rrb.Horizontal(*columns, name="cones"),
-                     rrb.TextDocumentView(origin=f"{ROOT}/cameras", name="cameras"), row_shares=[5, 1]),
+                     rrb.TextDocumentView(origin=f"{ROOT}/cameras", name="cameras"), row_shares=[4, 1]),
         rrb.TimePanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"), rrb.BlueprintPanel(state="collapsed"))

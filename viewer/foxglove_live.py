@@ -1,0 +1,116 @@
+"""`topside live --foxglove`: the MCAP archive's channels streamed live through foxglove-sdk's WebSocket server.
+
+The messages are built by viewer/archive.py's Archive, the one that writes `track --mcap` archives: its file is
+replaced by ChannelWriter, which publishes each message on a channel of the same topic, schema and encoding
+(protobuf), so the live stream and the archive cannot drift. Foxglove opens it as a "Foxglove WebSocket" connection
+(ws://<address>:<port>); docs/foxglove-layout.json lays it out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import foxglove
+from google.protobuf.message import Message
+from mcap.well_known import MessageEncoding, SchemaEncoding
+from mcap_protobuf.schema import build_file_descriptor_set
+
+from tracking.camera import CameraModel, load_camera
+from tracking.filtering import ConeEstimate
+from tracking.live import LiveUpdate
+from tracking.pipeline import FrameResult
+from tracking.rig import Rig
+from viewer.archive import Archive, ArchiveInputs, frame_view
+
+DEFAULT_PORT = 8765  # Foxglove's own default for a WebSocket connection
+SERVER_NAME = "topside"
+
+
+class ChannelWriter:
+    """Stands in for the Archive's ArchiveFile: every message goes out on its topic's channel as it is written.
+
+    Metadata, attachments and chunk flushes belong to the file and have no live counterpart; they are dropped.
+    """
+
+    def __init__(self, context: foxglove.Context) -> None:
+        self.context = context
+        self.channels: dict[str, foxglove.Channel] = {}
+        self.first_ns: int | None = None
+        self.last_ns: int | None = None
+
+    def write(self, topic: str, message: Message, ns: int) -> None:
+        """One protobuf message at log time ns, on its topic's channel (advertised with the message's schema)."""
+        channel = self.channels.get(topic)
+        if channel is None:
+            schema = foxglove.Schema(name=message.DESCRIPTOR.full_name, encoding=SchemaEncoding.Protobuf,
+                                     data=build_file_descriptor_set(type(message)).SerializeToString())
+            channel = foxglove.Channel(topic, schema=schema, message_encoding=MessageEncoding.Protobuf,
+                                       context=self.context)
+            self.channels[topic] = channel
+        channel.log(message.SerializeToString(), log_time=ns)
+        self.first_ns = ns if self.first_ns is None else min(self.first_ns, ns)
+        self.last_ns = ns if self.last_ns is None else max(self.last_ns, ns)
+
+    def metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """A metadata record: the file's only."""
+
+    def attach(self, name: str, media_type: str, data: bytes, log_time: int = 0, create_time: int = 0) -> None:
+        """An attachment: the file's only."""
+
+    def flush(self) -> None:
+        """Nothing waits: every message went out when written."""
+
+    def close(self, **manifest_extra: object) -> dict:
+        """Close every channel (unadvertised to the clients). Returns no manifest."""
+        for channel in self.channels.values():
+            channel.close()
+        return {}
+
+
+class FoxgloveStream:
+    """A live session's archive channels on a Foxglove WebSocket server bound to one address of this machine."""
+
+    def __init__(self, rig: Rig, address: str, port: int = DEFAULT_PORT, options: Mapping[str, str] | None = None,
+                 cameras: Mapping[str, CameraModel] | None = None) -> None:
+        self.rig = rig
+        self.context = foxglove.Context()
+        self.server = foxglove.start_server(name=f"{SERVER_NAME} {rig.name}", host=address, port=port,
+                                            context=self.context)
+        self.writer = ChannelWriter(self.context)
+        cams = dict(cameras) if cameras is not None else {
+            c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
+        self.archive = Archive(None, rig, ArchiveInputs.from_rig(rig, options or {}), cams, file=self.writer)
+        self.closed = False
+
+    @property
+    def port(self) -> int:
+        """The port the server listens on (the one asked for, or the one the OS gave for 0)."""
+        return self.server.port
+
+    def on_frame(self, result: FrameResult) -> None:
+        """One processed frame: image, calibration, detections, camera frame, health, events."""
+        self.archive.frame(frame_view(self.rig, self.archive.cameras[result.camera], result))
+
+    def on_estimate(self, estimate: ConeEstimate) -> None:
+        """One cone estimate: offset, topside and filter camera frames, state changes."""
+        self.archive.estimate(estimate)
+
+    def on_update(self, update: LiveUpdate) -> None:
+        """A live update's frames and estimates, in capture-time order."""
+        order = sorted([(r.time, 0, k) for k, r in enumerate(update.results)]
+                       + [(e.time, 1, k) for k, e in enumerate(update.estimates)])
+        for _, kind, k in order:
+            if kind == 0:
+                self.on_frame(update.results[k])
+            else:
+                self.on_estimate(update.estimates[k])
+
+    def close(self) -> None:
+        """The archive's closing messages, then the server stops (its clients are disconnected)."""
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self.archive.close()
+        finally:
+            self.server.stop()
