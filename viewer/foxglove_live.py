@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import foxglove
+from foxglove.websocket import ChannelView, Client, ServerListener
 from google.protobuf.message import Message
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap_protobuf.schema import build_file_descriptor_set
@@ -24,6 +25,8 @@ from viewer.archive import Archive, ArchiveInputs, frame_view
 
 DEFAULT_PORT = 8765  # Foxglove's own default for a WebSocket connection
 SERVER_NAME = "topside"
+LATCHED_SUFFIXES = ("/calibration", "/frames/markers")  # state, not events: a client that subscribes gets the newest
+# message at once (the archive repeats them only every second of capture time)
 
 
 class ChannelWriter:
@@ -35,6 +38,7 @@ class ChannelWriter:
     def __init__(self, context: foxglove.Context) -> None:
         self.context = context
         self.channels: dict[str, foxglove.Channel] = {}
+        self.latest: dict[str, tuple[bytes, int]] = {}  # latched topics: the newest message and its log time
         self.first_ns: int | None = None
         self.last_ns: int | None = None
 
@@ -47,9 +51,18 @@ class ChannelWriter:
             channel = foxglove.Channel(topic, schema=schema, message_encoding=MessageEncoding.Protobuf,
                                        context=self.context)
             self.channels[topic] = channel
-        channel.log(message.SerializeToString(), log_time=ns)
+        data = message.SerializeToString()
+        channel.log(data, log_time=ns)
+        if topic.endswith(LATCHED_SUFFIXES):
+            self.latest[topic] = (data, ns)
         self.first_ns = ns if self.first_ns is None else min(self.first_ns, ns)
         self.last_ns = ns if self.last_ns is None else max(self.last_ns, ns)
+
+    def resend(self, topic: str) -> None:
+        """A latched topic's newest message again (to its subscribers, the new one among them)."""
+        if topic in self.latest and topic in self.channels:
+            data, ns = self.latest[topic]
+            self.channels[topic].log(data, log_time=ns)
 
     def metadata(self, name: str, data: Mapping[str, str]) -> None:
         """A metadata record: the file's only."""
@@ -67,6 +80,16 @@ class ChannelWriter:
         return {}
 
 
+class Latch(ServerListener):
+    """On a new subscription, the latched topic's newest message (calibration, marker frames)."""
+
+    def __init__(self, writer: ChannelWriter) -> None:
+        self.writer = writer
+
+    def on_subscribe(self, client: Client, channel: ChannelView) -> None:
+        self.writer.resend(channel.topic)
+
+
 class FoxgloveStream:
     """A live session's archive channels on a Foxglove WebSocket server bound to one address of this machine."""
 
@@ -74,9 +97,9 @@ class FoxgloveStream:
                  cameras: Mapping[str, CameraModel] | None = None) -> None:
         self.rig = rig
         self.context = foxglove.Context()
-        self.server = foxglove.start_server(name=f"{SERVER_NAME} {rig.name}", host=address, port=port,
-                                            context=self.context)
         self.writer = ChannelWriter(self.context)
+        self.server = foxglove.start_server(name=f"{SERVER_NAME} {rig.name}", host=address, port=port,
+                                            context=self.context, server_listener=Latch(self.writer))
         cams = dict(cameras) if cameras is not None else {
             c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
         self.archive = Archive(None, rig, ArchiveInputs.from_rig(rig, options or {}), cams, file=self.writer)
