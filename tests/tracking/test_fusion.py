@@ -177,7 +177,7 @@ def camera_rig(far_mount: str = "drone") -> Rig:
     the_rig = rig()
     cams = [{"name": n, "calibration": f"{n}.yaml", "source": f"{n}.mp4",
              "mount": far_mount if n == "far" else "drone"} for n in CAMERA_EYES]
-    return Rig.model_validate({**the_rig.model_dump(), "cameras": cams})
+    return Rig.model_validate({**the_rig.model_dump(exclude_none=True), "cameras": cams})
 
 
 def topside_T(t: float) -> np.ndarray:
