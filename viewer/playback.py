@@ -147,9 +147,10 @@ def grpc_url(host: str, grpc_port: int) -> str:
 
 
 def web_viewer_url(address: str, grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT) -> str:
-    """The page to open in a browser: the web viewer, told where its data is (the query quoted: '+' is a space)."""
+    """The page to open in a browser: the web viewer, told where its data is (the query quoted: '+' is a space), its
+    welcome screen off (offline, as on a vessel, its examples fail to load with a notice over the right column)."""
     host = url_host(address)
-    return f"http://{host}:{web_port}/?url={urllib.parse.quote(grpc_url(host, grpc_port), safe='')}"
+    return f"http://{host}:{web_port}/?url={urllib.parse.quote(grpc_url(host, grpc_port), safe='')}&hide_welcome_screen"
 
 
 def check_port_free(address: str, port: int, option: str) -> None:
