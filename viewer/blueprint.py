@@ -23,22 +23,41 @@ class LayoutSender:
     a call; a superintendent whose drones swap cones would grow for six hours). This sender keeps one stream and
     logs every layout into it at the next step of the "blueprint" timeline; each send drains it through a fresh
     memory sink, which also repeats the store's info, so a segment file that receives a layout can open alone.
+    The previous layout's containers and views are cleared as the next is logged: left in the store, the viewer warns
+    of "broken references" in a notice that covered a cone's column on the superintendent's tablet.
     """
 
     def __init__(self, application_id: str) -> None:
         self._stream = rr.RecordingStream._from_native(bindings.new_blueprint(
             application_id=application_id, make_default=False, make_thread_default=False, default_enabled=True))
         self._step = 0
+        self._paths: list[str] = []  # the blueprint paths of the layout logged last
 
     def send(self, rec: rr.RecordingStream, blueprint: rrb.Blueprint, make_active: bool = True,
              make_default: bool = False) -> None:
         """The layout to the recording's sinks (file and viewer), made active there."""
         memory = self._stream.memory_recording()  # a new sink: it gets the store's info, then this layout
         self._stream.set_time("blueprint", sequence=self._step)
+        paths = blueprint_paths(blueprint)
+        for path in set(self._paths) - set(paths):
+            self._stream.log(path, rr.Clear(recursive=True))
+        self._paths = paths
         blueprint._log_to_stream(self._stream)
         self._stream.flush()
         bindings.send_blueprint(memory.storage, make_active, make_default, recording=rec.to_native())
         self._step += 1
+
+
+def blueprint_paths(blueprint: rrb.Blueprint) -> list[str]:
+    """The store paths of a layout's containers and views (container/<id>, view/<id>)."""
+    paths = []
+    pending = [blueprint.root_container] if hasattr(blueprint, "root_container") else []
+    while pending:
+        item = pending.pop()
+        paths.append(item.blueprint_path())
+        if isinstance(item, rrb.Container):  # a view's `contents` is its query, not children
+            pending += list(item.contents)
+    return paths
 
 
 def analysis_blueprint(rig: Rig, with_truth: bool) -> rrb.Blueprint:

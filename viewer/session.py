@@ -179,7 +179,8 @@ class Recorder:
         self._measured: Counter[tuple[str, str]] = Counter()  # (cone, camera) -> pair offsets
         self._cone_cameras: dict[str, str] = {}
         self._blueprint_sent = -np.inf
-        self._layouts: LayoutSender | None = None  # live: the superintendent's layout as cameras per cone change
+        self._layouts: list[LayoutSender] = []  # live: the superintendent's layout as cameras per cone change, one
+        # sender per stream (each clears the layout its own stream had)
         self._board_logged = -np.inf
         self._last_update: LiveUpdate | None = None
         self._estimates: list[ConeEstimate] = []  # not yet sent
@@ -444,10 +445,11 @@ class Recorder:
         first = self._blueprint_sent == -np.inf
         if first or (mapping != self._cone_cameras and (not self._cone_cameras
                                                          or now - self._blueprint_sent >= BLUEPRINT_MIN_PERIOD_S)):
-            self._layouts = self._layouts or LayoutSender(APP_ID)
+            self._layouts = self._layouts or [LayoutSender(APP_ID) for _ in self._streams()]
             self._show_cameras(set(mapping.values()))
-            for stream in self._streams():
-                self._layouts.send(stream, superintendent_blueprint(self.rig, mapping))
+            layout = superintendent_blueprint(self.rig, mapping)
+            for sender, stream in zip(self._layouts, self._streams(), strict=True):
+                sender.send(stream, layout)
             self._cone_cameras = mapping
             self._blueprint_sent = now
 

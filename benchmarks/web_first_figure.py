@@ -1,0 +1,266 @@
+"""Time from opening Rerun's web viewer to its first figure, in headless Chromium (software WebGL) at tablet size.
+
+live: `topside live --web --speed 1` on a simulated scene (config2-procedure5, 4 cameras at 15 FPS, 920×600), the
+page opened OPEN_AFTER_S into the session, for both --viewer-scope values (superintendent: the viewer gets only what
+its layout shows; all: everything recorded).
+recording: `topside view --web` on a 10-minute live recording (the scene looped through the live path, 1-minute
+segments, the superintendent's layout): the whole of it, its last minute (--from), and one segment file alone.
+
+Phases, in seconds from opening the page: the viewer running (its WebHandle), its state listing the layout's views
+with capture-time data, and the first figure: every cone's bull's-eye ring drawn in its state colour (read from a
+screenshot's pixels; screenshots take ~0.5-2 s each in software GL, which bounds the resolution). Also: the live
+viewer's lag behind the live clock when the figure shows. All on this machine's 2 cores, shared with the tracker
+(and with whatever else runs: the load average is reported).
+
+Run: .venv/bin/python -m benchmarks.web_first_figure [--repeats 3] [--screenshots docs]
+Results: benchmarks/results/web_first_figure.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.report import write_results
+from benchmarks.scenes import CACHE, render_scene
+from tests.browser import TABLET, ViewerState, web_viewer
+from viewer.superintendent import ROOT
+
+SCENARIO = "config2-procedure5"
+CLIP_S = 20.0
+RECORDING_MIN = 10.0
+SEGMENT_S = 60.0
+OPEN_AFTER_S = 4.0  # the tablet's page is opened this long into the live session
+TIMEOUT_S = 120.0
+TARGET_LIVE_S = 5.0
+TOPSIDE = [sys.executable, "-m", "tracking.cli"]
+
+
+@dataclass
+class Timing:
+    """One opening of the page: seconds from opening it to each phase (NaN: never within the timeout)."""
+
+    case: str
+    handle: float
+    views: float
+    figure: float  # when the first screenshot showing it came back (an upper bound)
+    figure_from: float = math.nan  # when that screenshot was asked for (the figure was not drawn much before)
+    lag: float = math.nan  # live: the live clock minus the viewer's newest capture time, when the figure showed
+    renderer: str = ""
+    note: str = ""
+
+
+def free_port() -> int:
+    """A TCP port nobody listens on."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def cones_of(rig: Path) -> list[str]:
+    """The cones a rig's superintendent layout has a column for."""
+    from tracking.rig import load_rig
+
+    r = load_rig(rig)
+    return sorted(r.cones) or sorted({p.cone for p in r.all_pairs()})
+
+
+def layout_ready(cones: list[str]) -> Callable[[ViewerState], bool]:
+    """The viewer's state lists every cone's bull's-eye and has capture-time data."""
+    wanted = {f"/{ROOT}/targets/{c}" for c in cones}
+    return lambda s: wanted <= {o for _, _, o in s.views} and s.timelines.get("capture_time", (0, None))[1] is not None
+
+
+@contextmanager
+def serving(cmd: list[str], marker: str) -> Iterator[tuple[subprocess.Popen, str, float]]:
+    """A topside command printing a URL after `marker`: (process, URL, seconds until it printed it); SIGTERM after."""
+    t0 = time.monotonic()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        line = ""
+        while marker not in line:
+            line = proc.stdout.readline()
+            if not line and proc.poll() is not None:
+                raise RuntimeError(f"{' '.join(cmd)} ended ({proc.returncode}) before printing {marker!r}")
+        url = line.split(marker, 1)[1].strip().strip('"')
+        yield proc, url, time.monotonic() - t0
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+
+
+def open_page(url: str, cones: list[str], case: str, scale: float = 1.0, shot: Path | None = None,
+              live_start: float | None = None) -> Timing:
+    """Open the page and time its phases; a screenshot of the figure when asked."""
+    with web_viewer(url, TABLET, scale) as page:
+        page.page.wait_for_function("() => window._handle !== undefined", timeout=TIMEOUT_S * 1000)
+        handle = time.monotonic() - page.opened
+        page_renderer = page.renderer()
+        try:
+            views, _ = page.wait_for_state(layout_ready(cones), TIMEOUT_S)
+            figure_from, figure, _ = page.wait_for_rings(len(cones), TIMEOUT_S)
+        except TimeoutError as exc:
+            return Timing(case, handle, math.nan, math.nan, renderer=page_renderer, note=str(exc)[:80])
+        lag = math.nan
+        if live_start is not None:
+            end = page.state().timelines.get("capture_time", (None, None))[1]
+            lag = time.monotonic() - live_start - end / 1e9 if end is not None else math.nan
+        if shot is not None:
+            time.sleep(2.0)  # a later moment than the first figure: the images decoded, the trend begun
+            page.screenshot(shot)
+    return Timing(case, handle, views, figure, figure_from, lag, page_renderer)
+
+
+def live_runs(scene: Path, repeats: int, screenshots: Path | None) -> list[Timing]:
+    """The page opened OPEN_AFTER_S into a live session, for each viewer scope."""
+    out = []
+    cones = cones_of(scene / "rig.yaml")
+    for scope in ("superintendent", "all"):
+        for k in range(repeats + (2 if screenshots is not None and scope == "superintendent" else 0)):
+            work = CACHE / "web-first-figure" / f"live-{scope}-{k}-{os.getpid()}"
+            cmd = [*TOPSIDE, "live", "--rig", str(scene / "rig.yaml"), "--web", "--speed", "1",
+                   "--web-port", str(free_port()), "--grpc-port", str(free_port()), "--viewer-scope", scope,
+                   "--rrd", str(work / "live.rrd")]
+            with serving(cmd, "web viewer: ") as (_, url, _):
+                started = time.monotonic()
+                time.sleep(OPEN_AFTER_S)
+                shot, scale = None, 1.0
+                if screenshots is not None and scope == "superintendent" and k >= repeats:
+                    scale = 1.0 if k == repeats else 2.0  # 1280x800 CSS pixels, then a 2560x1600 screen
+                    shot = screenshots / f"superintendent-tablet-{1280 * int(scale)}x{800 * int(scale)}.png"
+                size = f", {1280 * int(scale)}×{800 * int(scale)} px" if shot is not None else ""
+                timing = open_page(url, cones, f"live, --viewer-scope {scope}{size}, page opened {OPEN_AFTER_S:g} s in",
+                                   scale, shot, started)
+            out.append(timing)
+            print(timing, flush=True)
+            remove_tree(work)
+    return out
+
+
+def remove_tree(path: Path) -> None:
+    """A benchmark's own folder, gone."""
+    import shutil
+
+    shutil.rmtree(path, ignore_errors=True)
+
+
+def ten_minute_recording(scene: Path) -> Path:
+    """A 10-minute live recording of the scene looped (cached): the live path flat out, 1-minute segments."""
+    from tracking.cli import LIVE_ESTIMATE_PERIOD_S
+    from tracking.live import LiveTracker
+    from tracking.rig import load_rig
+    from viewer.session import Recorder
+
+    folder = CACHE / f"web-recording-{SCENARIO}-{RECORDING_MIN:g}min"
+    rrd = folder / "live.rrd"
+    if (folder / "live.segments.csv").is_file():
+        return rrd
+    remove_tree(folder)
+    rig = load_rig(scene / "rig.yaml")
+    recorder = Recorder(rig, rrd, segment_s=SEGMENT_S, layout="superintendent",
+                        estimate_period_s=LIVE_ESTIMATE_PERIOD_S)
+    with LiveTracker(rig, speed=math.inf, loop_until=RECORDING_MIN * 60) as tracker:
+        for update in tracker.updates():
+            recorder.on_update(update)
+    recorder.close()
+    return rrd
+
+
+def recording_runs(rrd: Path, cones: list[str], repeats: int) -> list[tuple[Timing, float, float]]:
+    """`topside view --web` on the whole recording, its last minute, one segment: (timing, MB, server start s)."""
+    segments = sorted(rrd.parent.glob(f"{rrd.stem}-*.rrd"))
+    last_start = float(np.loadtxt(rrd.with_name(f"{rrd.stem}.segments.csv"), delimiter=",", skiprows=1,
+                                  usecols=1)[-1])
+    cases = [("10-minute recording, whole", [str(rrd)], sum(s.stat().st_size for s in segments)),
+             ("10-minute recording, last minute (--from)", [str(rrd), "--from", f"{last_start:g}"],
+              segments[-1].stat().st_size),
+             ("one 1-minute segment file", [str(segments[len(segments) // 2])],
+              segments[len(segments) // 2].stat().st_size)]
+    out = []
+    for case, args, size in cases:
+        for _ in range(repeats):
+            cmd = [*TOPSIDE, "view", *args, "--web", "--web-port", str(free_port()), "--grpc-port", str(free_port())]
+            with serving(cmd, "http://") as (_, url, started):
+                timing = open_page("http://" + url, cones, case)
+            print(timing, f"{size / 1e6:.0f} MB, server {started:.1f} s", flush=True)
+            out.append((timing, size / 1e6, started))
+    return out
+
+
+def median(values: list[float]) -> float:
+    """Median of the finite values (NaN when none)."""
+    finite = [v for v in values if math.isfinite(v)]
+    return float(np.median(finite)) if finite else math.nan
+
+
+def fmt(v: float) -> str:
+    """A time for the table, '–' for never."""
+    return f"{v:.1f}" if math.isfinite(v) else "–"
+
+
+def figure(runs: list[Timing]) -> str:
+    """The first figure's median window: after the screenshot before, by the one that showed it."""
+    low, high = median([t.figure_from for t in runs]), median([t.figure for t in runs])
+    return f"{fmt(low)}–{fmt(high)}" if math.isfinite(high) else "–"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--screenshots", type=Path, default=None, help="save the tablet screenshots here")
+    parser.add_argument("--skip-recording", action="store_true")
+    args = parser.parse_args()
+    scene = render_scene(SCENARIO, (920, 600), CLIP_S)
+    load = os.getloadavg()
+    live = live_runs(scene, args.repeats, args.screenshots)
+    recorded = [] if args.skip_recording else recording_runs(ten_minute_recording(scene), cones_of(scene / "rig.yaml"),
+                                                             args.repeats)
+    load_after = os.getloadavg()
+    renderers = sorted({t.renderer for t in live + [t for t, _, _ in recorded] if t.renderer})
+    lines = ["# Time to the first figure in Rerun's web viewer", "",
+             f"`benchmarks/web_first_figure.py --repeats {args.repeats}`: headless Chromium (Debian's) at "
+             f"{TABLET['width']}×{TABLET['height']} CSS pixels, WebGL in software ({'; '.join(renderers)}), "
+             f"rerun-sdk's web viewer; {SCENARIO}, 4 cameras at 15 FPS, 920×600. Seconds from opening the page, "
+             f"medians of {args.repeats} (every run below). First figure: every cone's bull's-eye ring drawn, seen "
+             "in a screenshot: it was drawn after the screenshot before it and by the time this one came back "
+             f"(both shown). Live lag: the live clock minus the viewer's newest capture time then. Target live: "
+             f"≤ {TARGET_LIVE_S:g} s.", "",
+             f"Machine: {os.cpu_count()} cores shared by the browser, the tracker (live) and other work; load "
+             f"average {load[0]:.1f} before, {load_after[0]:.1f} after.", "",
+             "| case | data | viewer running | views listed | first figure | live lag |",
+             "|---|---:|---:|---:|---:|---:|"]
+    for case in dict.fromkeys(t.case for t in live):
+        runs = [t for t in live if t.case == case]
+        lines.append(f"| {case} | stream | {fmt(median([t.handle for t in runs]))} "
+                     f"| {fmt(median([t.views for t in runs]))} | {figure(runs)} "
+                     f"| {fmt(median([t.lag for t in runs]))} |")
+    for case in dict.fromkeys(t.case for t, _, _ in recorded):
+        runs = [(t, mb, s) for t, mb, s in recorded if t.case == case]
+        lines.append(f"| {case} (server up in {fmt(median([s for _, _, s in runs]))} s) | {runs[0][1]:.0f} MB "
+                     f"| {fmt(median([t.handle for t, _, _ in runs]))} | {fmt(median([t.views for t, _, _ in runs]))} "
+                     f"| {figure([t for t, _, _ in runs])} | |")
+    lines += ["", "Every run:", "", "| case | viewer running | views listed | first figure | live lag | note |",
+              "|---|---:|---:|---:|---:|---|"]
+    for t in live + [t for t, _, _ in recorded]:
+        lines.append(f"| {t.case} | {fmt(t.handle)} | {fmt(t.views)} | {figure([t])} | {fmt(t.lag)} | {t.note} |")
+    write_results("web_first_figure", lines, echo=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,226 @@
+"""Rerun's web viewer in a real browser: headless Chromium (Debian's) driven by Playwright, read through the viewer's
+own state (the page's WebHandle.viewer_state(), Rerun's Viewer Control API) and its pixels.
+
+Used by tests/viewer/test_web_viewer.py and benchmarks/web_first_figure.py. Never `playwright install`: it downloads
+a browser of its own; this drives the system's chromium (apt-get install chromium).
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from itertools import pairwise
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser")
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-quic", "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync"]
+# WebGL in software (no GPU here): Mesa's llvmpipe through ANGLE when Mesa's EGL is installed (libegl-mesa0,
+# libgl1-mesa-dri), else Chromium's SwiftShader. llvmpipe drew the first figure in about half SwiftShader's time.
+LLVMPIPE_ARGS = ["--use-gl=angle", "--use-angle=gl-egl", "--ignore-gpu-blocklist"]
+SWIFTSHADER_ARGS = ["--disable-gpu", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+MESA_EGL = ("/usr/lib/x86_64-linux-gnu/libEGL_mesa.so.0", "/usr/lib/aarch64-linux-gnu/libEGL_mesa.so.0",
+            "/usr/lib64/libEGL_mesa.so.0")
+# With a DevTools client attached (Playwright), every console message is serialised to it: the viewer's DEBUG log
+# (whole shader sources) took 3 of its first 6 s. A tablet's browser has no client attached; the page's console.debug
+# is silenced so that the measurements see what a tablet does.
+QUIET_CONSOLE = "console.debug = () => {};"
+STATE_COLORS = ((40, 200, 80), (255, 170, 0), (230, 40, 40), (140, 140, 140))  # viewer.superintendent TARGET_COLORS
+RING_MIN_PX = 300  # a drawn state ring covers ~1200 px at 1280x800; its exact colour, nowhere else on the page
+POLL_S = 0.1
+TABLET = {"width": 1280, "height": 800}  # CSS pixels of a 10-inch tablet (a 2560x1600 one at device scale 2)
+
+
+def software_gl() -> str:
+    """'llvmpipe' when Mesa's EGL is installed, else 'swiftshader'."""
+    return "llvmpipe" if any(Path(p).is_file() for p in MESA_EGL) else "swiftshader"
+
+
+def chromium_args(gl: str | None = None) -> list[str]:
+    """Chromium's command-line flags for a headless run with software WebGL (llvmpipe or swiftshader)."""
+    return CHROMIUM_ARGS + (LLVMPIPE_ARGS if (gl or software_gl()) == "llvmpipe" else SWIFTSHADER_ARGS)
+
+
+def chromium() -> str | None:
+    """The system's Chromium executable, or None."""
+    for candidate in CHROMIUM_CANDIDATES:
+        found = shutil.which(candidate)
+        if found:
+            return found
+    return None
+
+
+def _varint(data: bytes, i: int) -> tuple[int, int]:
+    value = shift = 0
+    while True:
+        byte = data[i]
+        i += 1
+        value |= (byte & 0x7F) << shift
+        shift += 7
+        if byte < 0x80:
+            return value, i
+
+
+def protobuf_fields(data: bytes) -> list[tuple[int, int | bytes]] | None:
+    """A protobuf message's fields in wire order (number, varint or bytes), or None when data is not one."""
+    out: list[tuple[int, int | bytes]] = []
+    i = 0
+    try:
+        while i < len(data):
+            key, i = _varint(data, i)
+            number, wire = key >> 3, key & 7
+            if number == 0:
+                return None
+            if wire == 0:
+                value, i = _varint(data, i)
+            elif wire in (1, 5):
+                size = 8 if wire == 1 else 4
+                value, i = data[i:i + size], i + size
+            elif wire == 2:
+                size, i = _varint(data, i)
+                value, i = data[i:i + size], i + size
+            else:
+                return None
+            if i > len(data):
+                return None
+            out.append((number, value))
+    except IndexError:
+        return None
+    return out
+
+
+def _text(value: int | bytes) -> str:
+    return value.decode(errors="replace") if isinstance(value, bytes) else str(value)
+
+
+def _signed(value: int | bytes) -> int:
+    """An int64 field's value (negative numbers travel as their 64-bit two's complement)."""
+    value = int.from_bytes(value, "little") if isinstance(value, bytes) else value
+    return value - (1 << 64) if value >= 1 << 63 else value
+
+
+@dataclass
+class ViewerState:
+    """What the web viewer reports (GetStateResponse of Rerun's Viewer Control API, decoded by field number)."""
+
+    views: list[tuple[str, str, str]] = field(default_factory=list)  # (class, name, origin)
+    timelines: dict[str, tuple[int | None, int | None]] = field(default_factory=dict)  # name -> (start, end)
+
+    @classmethod
+    def decode(cls, data: bytes) -> ViewerState:
+        """From the bytes of WebHandle.viewer_state(): views (field 5: id, class, name, origin) and the active
+        recording's timelines (field 3.3: name, type, range)."""
+        state = cls()
+        for number, value in protobuf_fields(data) or []:
+            sub = protobuf_fields(value) if isinstance(value, bytes) else None
+            if sub is None:
+                continue
+            if number == 5:
+                f = dict(sub)
+                state.views.append((_text(f.get(2, b"")), _text(f.get(3, b"")), _text(f.get(4, b""))))
+            elif number == 3:  # the active recording: its timelines (field 2: name, type, range start/end)
+                for n, timeline in sub:
+                    t = protobuf_fields(timeline) if n == 2 and isinstance(timeline, bytes) else None
+                    if not t:
+                        continue
+                    f = dict(t)
+                    name = dict(protobuf_fields(f[1]) or []).get(1, b"") if isinstance(f.get(1), bytes) else b""
+                    span = dict(protobuf_fields(f[3]) or []) if isinstance(f.get(3), bytes) else None
+                    state.timelines[_text(name)] = ((_signed(span.get(1, 0)), _signed(span[2]) if 2 in span else None)
+                                                    if span is not None else (None, None))
+        return state
+
+    def view_names(self) -> set[str]:
+        """The display names of every view."""
+        return {name for _, name, _ in self.views}
+
+
+@dataclass
+class Browser:
+    """A page of the web viewer, with the time it was opened (monotonic)."""
+
+    page: object  # playwright.sync_api.Page
+    opened: float = 0.0
+
+    def state(self) -> ViewerState:
+        """The viewer's state now (empty until the viewer has started)."""
+        raw = self.page.evaluate("() => window._handle ? Array.from(window._handle.viewer_state()) : []")
+        return ViewerState.decode(bytes(raw))
+
+    def renderer(self) -> str:
+        """The WebGL renderer the page gets (e.g. llvmpipe, SwiftShader)."""
+        return self.page.evaluate("""() => {
+            const gl = document.createElement('canvas').getContext('webgl2');
+            const info = gl && gl.getExtension('WEBGL_debug_renderer_info');
+            return info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : 'none'; }""")
+
+    def screenshot(self, path: Path | None = None) -> np.ndarray:
+        """The page as RGB (H, W, 3), saved as PNG too when a path is given."""
+        png = self.page.screenshot(path=str(path) if path is not None else None)
+        return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
+
+    def wait_for_state(self, ready, timeout: float) -> tuple[float, ViewerState]:
+        """Poll the viewer's state until ready(state); (seconds since the page was opened, the state)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            state = self.state()
+            if ready(state):
+                return time.monotonic() - self.opened, state
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the viewer's state never became ready: views {sorted(state.view_names())}, "
+                                   f"timelines {state.timelines}")
+            time.sleep(POLL_S)
+
+    def wait_for_rings(self, columns: int, timeout: float) -> tuple[float, float, np.ndarray]:
+        """Screenshot until each of `columns` equal columns of the page shows a bull's-eye ring in a state colour:
+        (seconds since the page was opened when that screenshot was asked for, and when it came: the figure was
+        drawn between the two; the screenshot)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            asked = time.monotonic() - self.opened
+            image = self.screenshot()
+            if all(n >= RING_MIN_PX for n in ring_pixels(image, columns)):
+                return asked, time.monotonic() - self.opened, image
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no state ring in every column: {ring_pixels(image, columns)} px")
+            time.sleep(POLL_S)
+
+
+def ring_pixels(image: np.ndarray, columns: int) -> list[int]:
+    """Pixels of exactly a state colour in each of `columns` equal vertical strips of an RGB image."""
+    mask = np.zeros(image.shape[:2], dtype=bool)
+    for color in STATE_COLORS:
+        mask |= np.all(image == np.array(color, dtype=np.uint8), axis=2)
+    edges = np.linspace(0, image.shape[1], columns + 1).astype(int)
+    return [int(mask[:, a:b].sum()) for a, b in pairwise(edges)]
+
+
+@contextmanager
+def web_viewer(url: str, viewport: dict[str, int] | None = None, scale: float = 1.0,
+               executable: str | None = None, gl: str | None = None) -> Iterator[Browser]:
+    """Headless Chromium (a fresh profile, software WebGL: gl or software_gl()) on the viewer's page, its
+    console.debug silenced; closed however the block ends."""
+    from playwright.sync_api import sync_playwright
+
+    executable = executable or chromium()
+    if executable is None:
+        raise FileNotFoundError("no chromium executable (apt-get install chromium)")
+    with sync_playwright() as p, tempfile.TemporaryDirectory(prefix="topside-chromium-") as profile:
+        context = p.chromium.launch_persistent_context(
+            profile, executable_path=executable, headless=True, args=chromium_args(gl),
+            viewport=viewport or TABLET, device_scale_factor=scale)
+        try:
+            page = context.pages[0] if context.pages else context.new_page()
+            page.add_init_script(QUIET_CONSOLE)
+            browser = Browser(page, time.monotonic())
+            page.goto(url)
+            yield browser
+        finally:
+            context.close()

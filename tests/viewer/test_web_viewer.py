@@ -1,0 +1,49 @@
+"""The superintendent's view in a real browser: `topside live --web` opened by headless Chromium at tablet size."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.browser import chromium, ring_pixels, web_viewer
+from tests.viewer.test_playback import free_port
+from viewer.superintendent import ROOT, STATE_RING_PX
+
+START_TIMEOUT_S = 90.0
+PAGE_TIMEOUT_S = 60.0  # the viewer's 43 MB of WebAssembly, compiled and run on a loaded 2-core machine in software GL
+
+
+@pytest.mark.skipif(chromium() is None, reason="no chromium binary (apt-get install chromium; .ci/run does)")
+def test_the_live_web_view_shows_every_cone_panel_on_a_tablet(installation: Path, tmp_path: Path) -> None:
+    web_port, grpc_port = free_port(), free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "tracking.cli", "live", "--rig", str(installation / "rig.yaml"),
+                             "--rrd", str(tmp_path / "live.rrd"), "--web", "--web-port", str(web_port),
+                             "--grpc-port", str(grpc_port), "--speed", "0.05"],  # 0.8 s of video over 16 s
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + START_TIMEOUT_S
+        line = ""
+        while "web viewer: http" not in line and time.monotonic() < deadline and proc.poll() is None:
+            line = proc.stdout.readline()
+        assert f"127.0.0.1:{web_port}" in line, proc.stderr.read() if proc.poll() is not None else line
+        url = line.split("web viewer: ", 1)[1].strip()
+        with web_viewer(url) as page:
+            column = {f"/{ROOT}/cones/A", f"/{ROOT}/targets/A", f"/{ROOT}/trend/A"}
+            t_views, state = page.wait_for_state(
+                lambda s: column <= {origin for _, _, origin in s.views}
+                and s.timelines.get("capture_time", (None, None))[1] is not None, PAGE_TIMEOUT_S)
+            _, t_ring, image = page.wait_for_rings(1, PAGE_TIMEOUT_S)
+            page.screenshot(tmp_path / "tablet.png")
+        assert {name for _, name, _ in state.views} >= {"cone A", "cameras"}
+        assert image.shape[:2] == (800, 1280)  # a 10-inch tablet's page
+        assert ring_pixels(image, 1)[0] > 2 * STATE_RING_PX * 100  # the bull's-eye's ring, in its state's colour
+        assert t_views <= t_ring <= PAGE_TIMEOUT_S
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=60)
+    assert proc.returncode in (0, 130)
