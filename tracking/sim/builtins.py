@@ -3,6 +3,7 @@
 Configuration 1 (Fig. 9): pairs on two perpendicular faces at 45 deg to the vessel on cones A and B,
 four stern cameras (one per pair), and one drone on a pair of rear cone C. Configuration 2
 (Fig. 10): pairs on cones A and D; A is filmed by a stern camera and a drone, D by two drones.
+`config1-cone-a` keeps only cone A's pairs and their stern cameras (not in the paper).
 
 Name suffixes: `-weather` adds the paper's fog 50 % and rain 30 %; `-clear` switches off fog, rain,
 noise, shadows, light changes and motion blur (for exact tests).
@@ -137,6 +138,16 @@ def procedure_scenario(config: int, procedure: str) -> Scenario:
                     pairs=pairs, cameras=cams, motion=motion, weather=weather)
 
 
+def one_cone_scenario() -> Scenario:
+    """Configuration 1's procedure 2 with markers at cone A only (its two faces towards the vessel) and the two stern
+    cameras watching them: every other cone's offset rests on the topside's rotation from markers 1.6 m apart."""
+    base = procedure_scenario(1, "procedure2")
+    pairs = [p for p in base.pairs if p.cone == "A"]
+    cams = [c for c in base.cameras if c.watch in {f"A/{p.face}" for p in pairs}]
+    return base.model_copy(update={"name": "config1-cone-a", "pairs": pairs, "cameras": cams,
+                                   "description": "Procedure 2 with markers at cone A only, two stern cameras."})
+
+
 def calibration_scenario() -> Scenario:
     """Thirty chessboard shots with the paper's camera (experiment 1)."""
     cam = CameraSpec(name="camera", kind="drone", position=[0, -10, 0], look_at=[0, 0, 0])
@@ -150,6 +161,7 @@ BUILTINS: dict[str, Callable[[], Scenario]] = {
     **{f"config2-procedure{i}": (lambda i=i: procedure_scenario(2, f"procedure{i}")) for i in range(5, 8)},
     "config1-setdown": lambda: procedure_scenario(1, "setdown"),
     "config2-setdown": lambda: procedure_scenario(2, "setdown"),
+    "config1-cone-a": one_cone_scenario,
     "calibration-shots": calibration_scenario,
 }
 CLEAR_WEATHER = {"fog": 0.0, "rain": 0.0, "noise": 0.0, "shadows": 0.0, "light_variation": 0.0,
