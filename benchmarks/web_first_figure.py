@@ -8,8 +8,9 @@ segments, the superintendent's layout): the whole of it, its last minute (--from
 
 Phases, in seconds from opening the page: the viewer running (its WebHandle), its state listing the layout's views
 with capture-time data, and the first figure: every cone's bull's-eye ring drawn in its state colour (read from a
-screenshot's pixels; screenshots take ~0.5-2 s each in software GL, which bounds the resolution). Also: the live
-viewer's lag behind the live clock when the figure shows. All on this machine's 2 cores, shared with the tracker
+frame's pixels, the frames watched as the browser makes them: DevTools' screencast, which stamps each). Also: the
+live viewer's lag behind the live clock when the figure shows (from the session's "live:" line, printed as its
+cameras start). All on this machine's 2 cores, shared with the tracker
 (and with whatever else runs: the load average is reported).
 
 Run: .venv/bin/python -m benchmarks.web_first_figure [--repeats 3] [--screenshots docs]
@@ -25,6 +26,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -55,8 +57,7 @@ class Timing:
     case: str
     handle: float
     views: float
-    figure: float  # when the first screenshot showing it came back (an upper bound)
-    figure_from: float = math.nan  # when that screenshot was asked for (the figure was not drawn much before)
+    figure: float  # when the browser made the first frame showing it
     lag: float = math.nan  # live: the live clock minus the viewer's newest capture time, when the figure showed
     renderer: str = ""
     note: str = ""
@@ -83,19 +84,41 @@ def layout_ready(cones: list[str]) -> Callable[[ViewerState], bool]:
     return lambda s: wanted <= {o for _, _, o in s.views} and s.timelines.get("capture_time", (0, None))[1] is not None
 
 
+@dataclass
+class Served:
+    """A topside command serving the viewer: its process, URL, and every line it printed with its time."""
+
+    process: subprocess.Popen
+    url: str
+    up_s: float  # seconds from the start until it printed the URL
+    lines: list[tuple[float, str]]  # (monotonic time, line)
+
+    def printed(self, prefix: str) -> float | None:
+        """When it printed a line starting with prefix (monotonic), or None."""
+        return next((t for t, line in self.lines if line.startswith(prefix)), None)
+
+
 @contextmanager
-def serving(cmd: list[str], marker: str) -> Iterator[tuple[subprocess.Popen, str, float]]:
-    """A topside command printing a URL after `marker`: (process, URL, seconds until it printed it); SIGTERM after."""
+def serving(cmd: list[str], marker: str) -> Iterator[Served]:
+    """A topside command printing a URL after `marker`; its output read (and timed) on; SIGTERM after."""
     t0 = time.monotonic()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    lines: list[tuple[float, str]] = []
+
+    def read() -> None:
+        for line in proc.stdout:
+            lines.append((time.monotonic(), line))
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
     try:
-        line = ""
-        while marker not in line:
-            line = proc.stdout.readline()
-            if not line and proc.poll() is not None:
+        while not any(marker in line for _, line in lines):
+            if proc.poll() is not None:
                 raise RuntimeError(f"{' '.join(cmd)} ended ({proc.returncode}) before printing {marker!r}")
+            time.sleep(0.02)
+        t_url, line = next((t, line) for t, line in lines if marker in line)
         url = line.split(marker, 1)[1].strip().strip('"')
-        yield proc, url, time.monotonic() - t0
+        yield Served(proc, url, t_url - t0, lines)
     finally:
         proc.send_signal(signal.SIGTERM)
         try:
@@ -114,7 +137,7 @@ def open_page(url: str, cones: list[str], case: str, scale: float = 1.0, shot: P
         page_renderer = page.renderer()
         try:
             views, _ = page.wait_for_state(layout_ready(cones), TIMEOUT_S)
-            figure_from, figure, _ = page.wait_for_rings(len(cones), TIMEOUT_S)
+            figure, _, _ = page.wait_for_rings(len(cones), TIMEOUT_S)
         except TimeoutError as exc:
             return Timing(case, handle, math.nan, math.nan, renderer=page_renderer, note=str(exc)[:80])
         lag = math.nan
@@ -124,7 +147,7 @@ def open_page(url: str, cones: list[str], case: str, scale: float = 1.0, shot: P
         if shot is not None:
             time.sleep(2.0)  # a later moment than the first figure: the images decoded, the trend begun
             page.screenshot(shot)
-    return Timing(case, handle, views, figure, figure_from, lag, page_renderer)
+    return Timing(case, handle, views, figure, lag, page_renderer)
 
 
 def live_runs(scene: Path, repeats: int, screenshots: Path | None) -> list[Timing]:
@@ -137,16 +160,18 @@ def live_runs(scene: Path, repeats: int, screenshots: Path | None) -> list[Timin
             cmd = [*TOPSIDE, "live", "--rig", str(scene / "rig.yaml"), "--web", "--speed", "1",
                    "--web-port", str(free_port()), "--grpc-port", str(free_port()), "--viewer-scope", scope,
                    "--rrd", str(work / "live.rrd")]
-            with serving(cmd, "web viewer: ") as (_, url, _):
-                started = time.monotonic()
+            with serving(cmd, "web viewer: ") as served:
+                while served.printed("live: ") is None:
+                    time.sleep(0.05)
                 time.sleep(OPEN_AFTER_S)
                 shot, scale = None, 1.0
                 if screenshots is not None and scope == "superintendent" and k >= repeats:
                     scale = 1.0 if k == repeats else 2.0  # 1280x800 CSS pixels, then a 2560x1600 screen
                     shot = screenshots / f"superintendent-tablet-{1280 * int(scale)}x{800 * int(scale)}.png"
                 size = f", {1280 * int(scale)}×{800 * int(scale)} px" if shot is not None else ""
-                timing = open_page(url, cones, f"live, --viewer-scope {scope}{size}, page opened {OPEN_AFTER_S:g} s in",
-                                   scale, shot, started)
+                timing = open_page(served.url, cones,
+                                   f"live, --viewer-scope {scope}{size}, page opened {OPEN_AFTER_S:g} s in", scale,
+                                   shot, served.printed("live: "))
             out.append(timing)
             print(timing, flush=True)
             remove_tree(work)
@@ -196,10 +221,10 @@ def recording_runs(rrd: Path, cones: list[str], repeats: int) -> list[tuple[Timi
     for case, args, size in cases:
         for _ in range(repeats):
             cmd = [*TOPSIDE, "view", *args, "--web", "--web-port", str(free_port()), "--grpc-port", str(free_port())]
-            with serving(cmd, "http://") as (_, url, started):
-                timing = open_page("http://" + url, cones, case)
-            print(timing, f"{size / 1e6:.0f} MB, server {started:.1f} s", flush=True)
-            out.append((timing, size / 1e6, started))
+            with serving(cmd, "http://") as served:
+                timing = open_page("http://" + served.url, cones, case)
+            print(timing, f"{size / 1e6:.0f} MB, server {served.up_s:.1f} s", flush=True)
+            out.append((timing, size / 1e6, served.up_s))
     return out
 
 
@@ -215,9 +240,8 @@ def fmt(v: float) -> str:
 
 
 def figure(runs: list[Timing]) -> str:
-    """The first figure's median window: after the screenshot before, by the one that showed it."""
-    low, high = median([t.figure_from for t in runs]), median([t.figure for t in runs])
-    return f"{fmt(low)}–{fmt(high)}" if math.isfinite(high) else "–"
+    """The first figure's median time."""
+    return fmt(median([t.figure for t in runs]))
 
 
 def main() -> None:
@@ -237,9 +261,9 @@ def main() -> None:
              f"`benchmarks/web_first_figure.py --repeats {args.repeats}`: headless Chromium (Debian's) at "
              f"{TABLET['width']}×{TABLET['height']} CSS pixels, WebGL in software ({'; '.join(renderers)}), "
              f"rerun-sdk's web viewer; {SCENARIO}, 4 cameras at 15 FPS, 920×600. Seconds from opening the page, "
-             f"medians of {args.repeats} (every run below). First figure: every cone's bull's-eye ring drawn, seen "
-             "in a screenshot: it was drawn after the screenshot before it and by the time this one came back "
-             f"(both shown). Live lag: the live clock minus the viewer's newest capture time then. Target live: "
+             f"medians of {args.repeats} (every run below). First figure: the first frame the browser made with "
+             "every cone's bull's-eye ring drawn (DevTools' screencast). Live lag: the live clock (from the "
+             "session's `live:` line) minus the viewer's newest capture time, then. Target live: "
              f"≤ {TARGET_LIVE_S:g} s.", "",
              f"Machine: {os.cpu_count()} cores shared by the browser, the tracker (live) and other work; load "
              f"average {load[0]:.1f} before, {load_after[0]:.1f} after.", "",

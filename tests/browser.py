@@ -7,6 +7,7 @@ a browser of its own; this drives the system's chromium (apt-get install chromiu
 
 from __future__ import annotations
 
+import base64
 import shutil
 import tempfile
 import time
@@ -147,7 +148,8 @@ class Browser:
     """A page of the web viewer, with the time it was opened (monotonic)."""
 
     page: object  # playwright.sync_api.Page
-    opened: float = 0.0
+    opened: float = 0.0  # monotonic
+    opened_epoch: float = 0.0  # wall clock (the screencast's frames carry wall-clock times)
 
     def state(self) -> ViewerState:
         """The viewer's state now (empty until the viewer has started)."""
@@ -179,18 +181,34 @@ class Browser:
             time.sleep(POLL_S)
 
     def wait_for_rings(self, columns: int, timeout: float) -> tuple[float, float, np.ndarray]:
-        """Screenshot until each of `columns` equal columns of the page shows a bull's-eye ring in a state colour:
-        (seconds since the page was opened when that screenshot was asked for, and when it came: the figure was
-        drawn between the two; the screenshot)."""
+        """Watch the page's frames as the compositor makes them (DevTools screencast) until each of `columns` equal
+        columns shows a bull's-eye ring in a state colour: (seconds from opening the page to that frame, to its
+        arrival here, the frame as RGB)."""
+        cdp = self.page.context.new_cdp_session(self.page)
+        frames: list[tuple[float, float, bytes]] = []  # (made, wall time, epoch s), (arrived, monotonic), PNG
+
+        def on_frame(event: dict) -> None:
+            frames.append((event["metadata"].get("timestamp", time.time()), time.monotonic(),
+                           base64.b64decode(event["data"])))
+            cdp.send("Page.screencastFrameAck", {"sessionId": event["sessionId"]})
+
+        cdp.on("Page.screencastFrame", on_frame)
+        cdp.send("Page.startScreencast", {"format": "png", "everyNthFrame": 1})
         deadline = time.monotonic() + timeout
-        while True:
-            asked = time.monotonic() - self.opened
-            image = self.screenshot()
-            if all(n >= RING_MIN_PX for n in ring_pixels(image, columns)):
-                return asked, time.monotonic() - self.opened, image
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"no state ring in every column: {ring_pixels(image, columns)} px")
-            time.sleep(POLL_S)
+        seen = 0
+        try:
+            while time.monotonic() < deadline:
+                self.page.wait_for_timeout(POLL_S * 1000)  # lets Playwright deliver the frames' events
+                for made, arrived, png in frames[seen:]:
+                    image = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
+                    if all(n >= RING_MIN_PX for n in ring_pixels(image, columns)):
+                        return made - self.opened_epoch, arrived - self.opened, image
+                seen = len(frames)
+        finally:
+            cdp.send("Page.stopScreencast")
+            cdp.detach()
+        last = ring_pixels(self.screenshot(), columns)
+        raise TimeoutError(f"no state ring in every column: {last} px")
 
 
 def ring_pixels(image: np.ndarray, columns: int) -> list[int]:
@@ -219,7 +237,7 @@ def web_viewer(url: str, viewport: dict[str, int] | None = None, scale: float = 
         try:
             page = context.pages[0] if context.pages else context.new_page()
             page.add_init_script(QUIET_CONSOLE)
-            browser = Browser(page, time.monotonic())
+            browser = Browser(page, time.monotonic(), time.time())
             page.goto(url)
             yield browser
         finally:

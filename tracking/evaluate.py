@@ -381,24 +381,49 @@ def evaluation_markdown(ev: Evaluation) -> str:
     return markdown_table(ev.axes, ev.name) + f"\n\nlag {lag_text} · availability {ev.availability:.1%}\n"
 
 
-def cone_figure(rows: pd.DataFrame, truth: pd.DataFrame, cone: str, title: str):
-    """Estimate, truth and error per axis over time for one cone: the paper's Fig. 12 (a matplotlib Figure)."""
-    import matplotlib.pyplot as plt
+AXIS_LABELS = {"dx": "Δx (to port)", "dy": "Δy (astern)", "dz": "Δz (up)"}
+TRUTH_COLOR, ESTIMATE_COLOR, SIGMA_COLOR, BAND_COLOR = "0.45", "tab:blue", "tab:blue", "tab:green"
+ERROR_SPAN_TOLERANCES = 1.3  # an error panel spans at least this many tolerances each way (a wide σ is cut off)
 
-    true = truth_at(truth, cone, rows["time"].to_numpy())
-    fig, axs = plt.subplots(3, 2, figsize=(12, 8), sharex=True, gridspec_kw={"width_ratios": [2, 1]})
-    for i, axis in enumerate(AXES):
-        axs[i, 0].plot(truth["time"], truth[f"cone_{cone}_{axis}"], color="0.5", lw=1.5, label="simulation log")
-        axs[i, 0].plot(rows["time"], rows[axis], lw=1.0, label="estimate")
-        axs[i, 0].set_ylabel(f"{axis} [m]")
-        axs[i, 1].plot(rows["time"], rows[axis].to_numpy() - true[:, i], lw=0.8)
-        axs[i, 1].axhspan(-TOLERANCE_M, TOLERANCE_M, color="g", alpha=0.08)
-        axs[i, 1].set_ylabel(f"error {axis} [m]")
-    axs[0, 0].legend(loc="best")
+
+def cone_figure(rows: pd.DataFrame, truth: pd.DataFrame, cone: str, title: str):
+    """Estimate, truth and error per axis over time for one cone: the paper's Fig. 12 (a matplotlib Figure). Errors
+    with the ±150 mm tolerance band and, where the offsets CSV has σ, the estimate's ±2σ band; units in every label;
+    one legend below the plots, covering none of them."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    time = rows["time"].to_numpy()
+    true = truth_at(truth, cone, time)
+    fig, axs = plt.subplots(3, 2, figsize=(12, 8.5), sharex=True, gridspec_kw={"width_ratios": [2, 1]})
+    for i, (axis, sd) in enumerate(zip(AXES, SIGMAS, strict=True)):
+        label = AXIS_LABELS[axis]
+        axs[i, 0].plot(truth["time"], truth[f"cone_{cone}_{axis}"], color=TRUTH_COLOR, lw=1.5)
+        axs[i, 0].plot(time, rows[axis], color=ESTIMATE_COLOR, lw=1.0)
+        axs[i, 0].set_ylabel(f"{label} [m]")
+        err = axs[i, 1]
+        err.axhspan(-TOLERANCE_M, TOLERANCE_M, color=BAND_COLOR, alpha=0.12, lw=0)
+        e = rows[axis].to_numpy(dtype=float) - true[:, i]
+        if sd in rows.columns and rows[sd].notna().any():  # σ only where there is an estimate to go with it
+            two = np.where(np.isfinite(e), 2 * rows[sd].to_numpy(dtype=float), np.nan)
+            err.fill_between(time, -two, two, color=SIGMA_COLOR, alpha=0.18, lw=0)
+        err.plot(time, e, color=ESTIMATE_COLOR, lw=0.8)
+        err.axhline(0.0, color=TRUTH_COLOR, lw=0.6)
+        worst = np.nanmax(np.abs(e)) if np.isfinite(e).any() else 0.0
+        lim = max(ERROR_SPAN_TOLERANCES * TOLERANCE_M, 1.2 * worst)  # the tolerance and every error in view
+        err.set_ylim(-lim, lim)
+        err.set_ylabel(f"error {label} [m]")
+    axs[0, 0].set_title("estimate and truth [m]")
+    axs[0, 1].set_title("error: estimate − truth [m]")
     axs[-1, 0].set_xlabel("capture time [s]")
     axs[-1, 1].set_xlabel("capture time [s]")
+    handles = [plt.Line2D([], [], color=TRUTH_COLOR, lw=1.5), plt.Line2D([], [], color=ESTIMATE_COLOR, lw=1.0),
+               Patch(color=BAND_COLOR, alpha=0.12), Patch(color=SIGMA_COLOR, alpha=0.18)]
+    labels = ["truth (simulation log)", "estimate", f"±{TOLERANCE_M * 1000:.0f} mm tolerance",
+              "±2σ of the estimate"]
+    fig.legend(handles, labels, loc="lower center", ncol=4, frameon=False)
     fig.suptitle(f"{title}: cone {cone}")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
     return fig
 
 

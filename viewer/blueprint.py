@@ -14,6 +14,7 @@ EYE_OFFSET_M = np.array([-18.0, -44.0, 3.0])  # default 3-D eye: from ahead and 
 HEALTH_SERIES = {"markers": "markers found", "reprojection_error_px": "reprojection [px]",
                  "frame_age_s": "frame age [s]"}
 AXIS_TITLES = {"dx": "Δx (to port) [m]", "dy": "Δy (astern) [m]", "dz": "Δz (up) [m]"}
+NO_LEGEND = rrb.PlotLegend(visible=False)  # a legend sits on the data; the key view names the colours instead
 
 
 class LayoutSender:
@@ -65,13 +66,16 @@ def analysis_blueprint(rig: Rig, with_truth: bool) -> rrb.Blueprint:
     points = list(rig.cones.values()) or [m.center for m in rig.markers]
     centre = np.mean(np.array(points, dtype=float), axis=0)
     cameras = [rrb.Spatial2DView(origin=f"world/cameras/{c.name}", name=c.name) for c in rig.cameras]
-    plots = [rrb.TimeSeriesView(origin=f"offsets/{axis}", name=title) for axis, title in AXIS_TITLES.items()]
+    plots = [rrb.TimeSeriesView(origin=f"offsets/{axis}", name=title, plot_legend=NO_LEGEND)
+             for axis, title in AXIS_TITLES.items()]
     if with_truth:
-        plots += [rrb.TimeSeriesView(origin=f"errors/{axis}", name=f"error {axis} [m]") for axis in AXIS_TITLES]
+        plots += [rrb.TimeSeriesView(origin=f"errors/{axis}", name=f"error {title}", plot_legend=NO_LEGEND)
+                  for axis, title in AXIS_TITLES.items()]
     health = rrb.Tabs(*(
-        rrb.TimeSeriesView(origin="health", contents=[f"health/{c.name}/{series}" for c in rig.cameras], name=title)
+        rrb.TimeSeriesView(origin="health", contents=[f"health/{c.name}/{series}" for c in rig.cameras], name=title,
+                           plot_legend=NO_LEGEND)
         for series, title in HEALTH_SERIES.items()),
-        rrb.TimeSeriesView(origin="uncertainty", name="estimate σ [m]"),
+        rrb.TimeSeriesView(origin="uncertainty", name="estimate 1σ [m]", plot_legend=NO_LEGEND),
         rrb.TextLogView(origin="health", contents=[f"health/{c.name}/video/events" for c in rig.cameras],
                         name="video problems"), name="camera health")
     middle = rrb.Vertical(
@@ -83,7 +87,8 @@ def analysis_blueprint(rig: Rig, with_truth: bool) -> rrb.Blueprint:
         rrb.Horizontal(
             rrb.Grid(*cameras, name="cameras", grid_columns=2 if len(cameras) > 1 else 1),
             middle,
-            rrb.Grid(*plots, grid_columns=2 if with_truth else 1, name="offsets"),
+            rrb.Vertical(rrb.TextDocumentView(origin="key", name="key to the plots' colours"),
+                         rrb.Grid(*plots, grid_columns=2 if with_truth else 1, name="offsets"), row_shares=[1, 9]),
             column_shares=[3, 3, 3]),
         rrb.TimePanel(state="collapsed"),
         collapse_panels=True)

@@ -9,7 +9,8 @@ Entity layout (the jacket frame is the world):
     world/estimated/<camera>             every marker's frame as that camera estimates it (boxes by id, axes)
     world/filter/cameras/<camera>        camera pose as the fused filter has it (all cameras, over time), a frustum
     world/truth/cameras/<camera>         camera pose in the truth log (the simulator's), a frustum
-    offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, uncertainty/<axis>/<cone> (1σ),
+    offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, errors/<axis>/<cone>/{plus,minus}_2sigma (the
+    estimate's ±2σ, about zero), uncertainty/<axis>/<cone> (1σ), key (markdown: which colour is what),
     health/<camera>/..., health/<camera>/video/<count> and .../events (a video's problems), status
 """
 
@@ -46,6 +47,11 @@ TRUTH_POSE_AXES = ("x", "y", "z", "rx", "ry", "rz")  # a truth log's camera_<nam
 AXES = ("dx", "dy", "dz")
 AXIS_COLORS = [(230, 60, 60), (60, 200, 60), (60, 120, 240)]
 CONE_COLORS = [(255, 140, 0), (0, 170, 255), (200, 80, 255), (80, 220, 120), (255, 220, 0), (255, 90, 150)]
+CONE_COLOR_NAMES = ("orange", "blue", "violet", "green", "yellow", "pink")  # for the plots' key, as CONE_COLORS
+CAMERA_COLORS = [(230, 60, 60), (60, 200, 200), (240, 240, 240), (160, 120, 60), (120, 120, 255), (255, 160, 200)]
+CAMERA_COLOR_NAMES = ("red", "cyan", "white", "brown", "lilac", "rose")
+SIGMA_LIGHTEN = 0.45  # a cone's ±2σ lines: its colour this much towards white
+TOLERANCE_COLOR = (255, 0, 0)
 JACKET_COLOR = (255, 170, 0)
 TOPSIDE_COLOR = (0, 200, 255)
 REJECTED_COLOR = (200, 0, 200)
@@ -276,6 +282,8 @@ def log_estimates(rec: rr.RecordingStream, estimates: list[ConeEstimate],
             if true_offsets is not None:
                 truth = true_offsets[rows]
                 send_scalars(rec, f"errors/{axis}/{cone}", times, offsets[:, k] - truth[:, k])
+                send_scalars(rec, f"errors/{axis}/{cone}/plus_2sigma", times, 2 * sds[:, k])
+                send_scalars(rec, f"errors/{axis}/{cone}/minus_2sigma", times, -2 * sds[:, k])
 
 
 def topside_pose(cones: dict[str, np.ndarray], offsets: dict[str, np.ndarray]) -> np.ndarray:
@@ -355,8 +363,10 @@ def cone_color(index: int, lighten: float = 0.0) -> tuple[int, int, int]:
     return tuple(int(v) for v in c + (255 - c) * lighten)
 
 
-def log_series_styles(rec: rr.RecordingStream, cones: Iterable[str], with_truth: bool) -> None:
-    """Static names and colours of every time series: a colour per cone, its truth a lighter shade."""
+def log_series_styles(rec: rr.RecordingStream, cones: Iterable[str], with_truth: bool,
+                      cameras: Iterable[str] = ()) -> None:
+    """Static names and colours of every time series: a colour per cone (its truth and ±2σ lighter shades), a
+    colour per camera for the health plots."""
     for k, cone in enumerate(cones):
         for axis in AXES:
             rr.log(f"offsets/{axis}/{cone}/estimate", rr.SeriesLines(colors=cone_color(k), names=f"{cone} estimate",
@@ -364,12 +374,33 @@ def log_series_styles(rec: rr.RecordingStream, cones: Iterable[str], with_truth:
             if with_truth:
                 rr.log(f"offsets/{axis}/{cone}/truth", rr.SeriesLines(colors=cone_color(k, 0.6), names=f"{cone} truth",
                                                                       widths=1.0), static=True, recording=rec)
-                rr.log(f"errors/{axis}/{cone}", rr.SeriesLines(colors=cone_color(k), names=f"{cone} error"),
-                       static=True, recording=rec)
+                rr.log(f"errors/{axis}/{cone}", rr.SeriesLines(colors=cone_color(k), names=f"{cone} error",
+                                                               widths=1.5), static=True, recording=rec)
+                for side in ("plus", "minus"):
+                    rr.log(f"errors/{axis}/{cone}/{side}_2sigma", rr.SeriesLines(
+                        colors=cone_color(k, SIGMA_LIGHTEN), names=f"{cone} ±2σ", widths=0.75), static=True,
+                        recording=rec)
     for axis in AXES:
         for label in ("upper", "lower"):
-            rr.log(f"errors/{axis}/tolerance_{label}", rr.SeriesLines(colors=(255, 0, 0), names=f"±{TOLERANCE_M} m",
+            rr.log(f"errors/{axis}/tolerance_{label}", rr.SeriesLines(colors=TOLERANCE_COLOR,
+                                                                      names=f"±{TOLERANCE_M * 1000:.0f} mm",
                                                                       widths=1.0), static=True, recording=rec)
+    for k, camera in enumerate(cameras):
+        for series in ("markers", "reprojection_error_px", "frame_age_s"):
+            rr.log(f"health/{camera}/{series}", rr.SeriesLines(colors=CAMERA_COLORS[k % len(CAMERA_COLORS)],
+                                                               names=camera), static=True, recording=rec)
+
+
+def log_plot_key(rec: rr.RecordingStream, cones: Iterable[str], cameras: Iterable[str], with_truth: bool) -> None:
+    """Static key of the plots' colours (markdown): the plots carry no legend, which would cover their data."""
+    cones_text = " · ".join(f"{c} {CONE_COLOR_NAMES[k % len(CONE_COLOR_NAMES)]}" for k, c in enumerate(cones))
+    cameras_text = " · ".join(f"{c} {CAMERA_COLOR_NAMES[k % len(CAMERA_COLOR_NAMES)]}" for k, c in enumerate(cameras))
+    lines = [f"**Cones:** {cones_text}" + (" — thick: estimate, thin pale: truth" if with_truth else "")]
+    if with_truth:
+        lines.append(f"**Errors:** red ±{TOLERANCE_M * 1000:.0f} mm tolerance · pale ±2σ of the estimate")
+    if cameras_text:
+        lines.append(f"**Cameras (health):** {cameras_text}")
+    rr.log("key", rr.TextDocument("  \n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True, recording=rec)
 
 
 def concentricity(offset: np.ndarray) -> float:

@@ -47,6 +47,7 @@ from viewer.recording import (
     log_frustum,
     log_health,
     log_image,
+    log_plot_key,
     log_rig,
     log_series_styles,
     log_topside_poses,
@@ -247,7 +248,8 @@ class Recorder:
         self._filter_frusta: set[str] = set()  # drawn with a camera's first filtered pose (none in the paper's mode)
         for name in self._video:
             log_video_codec(self.rec, name)
-        log_series_styles(self.rec, self.cones, self.truth is not None)
+        log_series_styles(self.rec, self.cones, self.truth is not None, self.cameras)
+        log_plot_key(self.rec, self.cones, self.cameras, self.truth is not None)
         for cone in self.cones:
             log_target_circle(self.rec, cone)
         if self.truth is not None and len(self._segments) <= 1:
