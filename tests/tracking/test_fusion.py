@@ -556,7 +556,7 @@ def test_the_smoother_shows_no_more_than_the_live_filter_with_markers_at_one_con
     """Markers at cone A only, 40 m from their cameras: the other cones rest on the topside's rotation from two markers
     1.6 m apart. The smoother shows a cone only where the live filter did then, and within the live filter's σ. Its own
     σ counted the frames after a step as independent of those before, which share each view's persistent errors: it
-    showed B and C 14 % of the time where the live filter showed them 1 %."""
+    showed B and C on 14 % of the rows, the live filter on 0.4 %."""
     the_rig = one_cone_rig()
     obs = one_cone_observations(the_rig, 40.0)
     live = {(e.time, e.cone): e for e in fused_estimates(the_rig, obs)}
