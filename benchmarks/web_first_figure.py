@@ -9,9 +9,9 @@ segments, the superintendent's layout): the whole of it, its last minute (--from
 Phases, in seconds from opening the page: the viewer running (its WebHandle), its state listing the layout's views
 with capture-time data, and the first figure: every cone's bull's-eye ring drawn in its state colour (read from a
 frame's pixels, the frames watched as the browser makes them: DevTools' screencast, which stamps each). Also: the
-live viewer's lag behind the live clock when the figure shows (from the session's "live:" line, printed as its
-cameras start). All on this machine's 2 cores, shared with the tracker
-(and with whatever else runs: the load average is reported).
+live viewer's lag behind the live clock when the figure shows (the clock from the session's first "<camera>: live"
+line, printed with the first frame of the replay, capture time ~0). All on this machine's 2 cores, shared with the
+tracker (and with whatever else runs: the load average is reported).
 
 Run: .venv/bin/python -m benchmarks.web_first_figure [--repeats 3] [--screenshots docs]
 Results: benchmarks/results/web_first_figure.md
@@ -93,16 +93,17 @@ class Served:
     up_s: float  # seconds from the start until it printed the URL
     lines: list[tuple[float, str]]  # (monotonic time, line)
 
-    def printed(self, prefix: str) -> float | None:
-        """When it printed a line starting with prefix (monotonic), or None."""
-        return next((t for t, line in self.lines if line.startswith(prefix)), None)
+    def printed(self, prefix: str = "", suffix: str = "") -> float | None:
+        """When it first printed a line with this start and end (monotonic), or None."""
+        return next((t for t, line in self.lines if line.startswith(prefix) and line.rstrip().endswith(suffix)),
+                    None)
 
 
 @contextmanager
 def serving(cmd: list[str], marker: str) -> Iterator[Served]:
     """A topside command printing a URL after `marker`; its output read (and timed) on; SIGTERM after."""
     t0 = time.monotonic()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines: list[tuple[float, str]] = []
 
     def read() -> None:
@@ -161,9 +162,9 @@ def live_runs(scene: Path, repeats: int, screenshots: Path | None) -> list[Timin
                    "--web-port", str(free_port()), "--grpc-port", str(free_port()), "--viewer-scope", scope,
                    "--rrd", str(work / "live.rrd")]
             with serving(cmd, "web viewer: ") as served:
-                while served.printed("live: ") is None:
+                while served.printed(suffix=": live") is None:  # a camera's first frame: capture time ~0
                     time.sleep(0.05)
-                time.sleep(OPEN_AFTER_S)
+                time.sleep(OPEN_AFTER_S)  # into the replay
                 shot, scale = None, 1.0
                 if screenshots is not None and scope == "superintendent" and k >= repeats:
                     scale = 1.0 if k == repeats else 2.0  # 1280x800 CSS pixels, then a 2560x1600 screen
@@ -171,7 +172,7 @@ def live_runs(scene: Path, repeats: int, screenshots: Path | None) -> list[Timin
                 size = f", {1280 * int(scale)}×{800 * int(scale)} px" if shot is not None else ""
                 timing = open_page(served.url, cones,
                                    f"live, --viewer-scope {scope}{size}, page opened {OPEN_AFTER_S:g} s in", scale,
-                                   shot, served.printed("live: "))
+                                   shot, served.printed(suffix=": live"))
             out.append(timing)
             print(timing, flush=True)
             remove_tree(work)
@@ -263,7 +264,7 @@ def main() -> None:
              f"rerun-sdk's web viewer; {SCENARIO}, 4 cameras at 15 FPS, 920×600. Seconds from opening the page, "
              f"medians of {args.repeats} (every run below). First figure: the first frame the browser made with "
              "every cone's bull's-eye ring drawn (DevTools' screencast). Live lag: the live clock (from the "
-             "session's `live:` line) minus the viewer's newest capture time, then. Target live: "
+             "session's first `<camera>: live` line) minus the viewer's newest capture time, then. Target live: "
              f"≤ {TARGET_LIVE_S:g} s.", "",
              f"Machine: {os.cpu_count()} cores shared by the browser, the tracker (live) and other work; load "
              f"average {load[0]:.1f} before, {load_after[0]:.1f} after.", "",
