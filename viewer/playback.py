@@ -204,9 +204,9 @@ def viewer_command(recording: Path, web: bool = False, address: str = "127.0.0.1
 def live_viewer_command(web: bool, address: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT
                         ) -> list[str]:
     """The rerun command line of a viewer that a live session streams to; its servers listen on the address only."""
-    if web:
+    if web:  # newest first: a tablet that connects late draws the present first, then the backlog behind it
         return [rerun_binary(), "--serve-web", "--bind", address, "--port", str(grpc_port),
-                "--web-viewer-port", str(web_port), "--server-memory-limit", VIEWER_MEMORY_LIMIT]
+                "--web-viewer-port", str(web_port), "--server-memory-limit", VIEWER_MEMORY_LIMIT, "--newest-first"]
     return [rerun_binary(), "--bind", address, "--port", str(grpc_port), "--memory-limit", VIEWER_MEMORY_LIMIT,
             "--expect-data-soon"]
 
