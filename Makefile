@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint venv clean
+.PHONY: demo test lint docs venv clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -24,5 +24,9 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+	@echo "site/index.html (or: $(BIN)/mkdocs serve, on 127.0.0.1:8000)"
+
 clean:
-	rm -rf $(VENV) .pytest_cache recordings/*.rrd recordings/*.mcap recordings/demo
+	rm -rf $(VENV) .pytest_cache site recordings/*.rrd recordings/*.mcap recordings/demo
