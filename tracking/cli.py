@@ -134,13 +134,17 @@ def calibrate(
         table.add_row(name, f"{err:.4f}")
     console.print(table)
     K, d = result.camera.K, result.camera.dist
-    std = result.std_intrinsics
+    std = dict(result.std_intrinsics)
+    if fix_aspect and "fy" in std:  # OpenCV reports 0 for fx, which it derives from fy at the fixed aspect
+        std["fx"] = std["fy"] * K[0, 0] / K[1, 1]
     console.print(f"views used: {len(result.per_view_rms)} of {len(images)}")
     console.print(f"total RMS reprojection error: {result.rms:.4f} px")
     values = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}
     values.update({n: d[i] for i, n in enumerate(calib.INTRINSIC_NAMES[4:4 + d.size])})
     for name, value in values.items():
-        console.print(f"  {name:>3} = {value:12.6f} ± {std.get(name, float('nan')):.6f}")
+        sigma = std.get(name)
+        console.print(f"  {name:>3} = {value:12.6f}" + (f" ± {sigma:.6f}" if sigma is not None and sigma > 0 else
+                                                         " (σ not estimated)"))
     if result.missed:
         console.print(f"no board found in {len(result.missed)}: {', '.join(result.missed)}", style="yellow")
     if result.coverage < calib.COVERAGE_WARN:
