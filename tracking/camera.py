@@ -3,12 +3,16 @@
 The file layout is the one OpenCV's calibration sample writes (`camera_matrix`,
 `distortion_coefficients`, `image_width`, `image_height`, `avg_reprojection_error`), so files
 from OpenCV, from `topside calibrate` and from the simulator are interchangeable.
+
+A file without `image_width` and `image_height` (OpenCV's tutorial files ship so) is read too: its model has no size
+until the first frame of its camera gives one (CameraModel.sized_from), with one warning line naming the file and the
+size taken; a later frame of another size is still an error. Undistortion and poses use only K and the distortion.
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -37,15 +41,33 @@ class CameraModel:
 
     K: np.ndarray  # (3, 3) camera matrix
     dist: np.ndarray  # (N,) distortion k1 k2 p1 p2 [k3 [k4 k5 k6 ...]]
-    width: int
-    height: int
+    width: int | None  # px; None: the file gives no size, the first frame will (sized_from)
+    height: int | None
     rms: float | None = None  # average reprojection error of the calibration, px
     extra: dict[str, float] = field(default_factory=dict)  # other scalars kept from the file
 
     @property
-    def image_size(self) -> tuple[int, int]:
-        """(width, height) in pixels."""
-        return (self.width, self.height)
+    def sized(self) -> bool:
+        """True when the image size is known (from the file, or from a first frame)."""
+        return self.width is not None and self.height is not None
+
+    @property
+    def image_size(self) -> tuple[int, int] | None:
+        """(width, height) in pixels; None until a frame gives a size the file did not."""
+        return (self.width, self.height) if self.width is not None and self.height is not None else None
+
+    def sized_from(self, width: int, height: int, path: str | Path, source: str | Path) -> tuple[CameraModel, str]:
+        """This model with the size of its camera's first frame, and the warning line that says so (path: the
+        calibration file, source: the camera's source)."""
+        warning = (f"{path}: image_width/image_height: not given; took {width}x{height} from the first frame of "
+                   f"{source}")
+        return replace(self, width=int(width), height=int(height)), warning
+
+    def size_problem(self, width: int, height: int) -> str | None:
+        """Why a frame of width x height does not fit this model, or None when it does (or the size is unknown)."""
+        if not self.sized or (width, height) == self.image_size:
+            return None
+        return f"frame is {width}x{height} but the calibration is for {self.width}x{self.height}"
 
     def undistort_points(self, pixels: np.ndarray) -> np.ndarray:
         """Distorted pixels (N, 2) to ideal pixels (N, 2) of the same K with no distortion."""
@@ -145,8 +167,15 @@ def load_camera(path: str | Path) -> CameraModel:
         dist = _read_matrix(fs, path, "distortion_coefficients", max(DISTORTION_SIZES))
         if dist is None:
             raise InputError(path, "missing (expected an OpenCV matrix)", "distortion_coefficients")
-        width = read_integer(fs, path, "image_width", 1, MAX_IMAGE_SIDE_PX, "an integer number of pixels")
-        height = read_integer(fs, path, "image_height", 1, MAX_IMAGE_SIDE_PX, "an integer number of pixels")
+        sizes = [present(fs.getNode(key)) for key in ("image_width", "image_height")]
+        if sizes[0] != sizes[1]:  # one without the other is a damaged file, not OpenCV's tutorial's
+            missing = "image_height" if sizes[0] else "image_width"
+            raise InputError(path, "missing (expected image_width and image_height both, or neither: then the first "
+                                   "frame gives the size)", missing)
+        width = height = None
+        if all(sizes):
+            width = read_integer(fs, path, "image_width", 1, MAX_IMAGE_SIDE_PX, "an integer number of pixels")
+            height = read_integer(fs, path, "image_height", 1, MAX_IMAGE_SIDE_PX, "an integer number of pixels")
         rms = _read_rms(fs, path)
     finally:
         fs.release()
@@ -174,12 +203,13 @@ def _read_rms(fs: cv2.FileStorage, path: Path) -> float | None:
 
 def save_camera(path: str | Path, camera: CameraModel, extra: dict[str, float | int | str] | None = None) -> None:
     """Write a camera model as OpenCV's calibration sample does (FileStorage YAML), atomically: the file appears
-    complete under its name or not at all."""
+    complete under its name or not at all (without a size when the model has none)."""
     with atomic_path(Path(path)) as partial:  # <stem>.partial.yaml: keeps the suffix OpenCV may look at
         fs = cv2.FileStorage(str(partial), cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_FORMAT_YAML)
         try:
-            fs.write("image_width", int(camera.width))
-            fs.write("image_height", int(camera.height))
+            if camera.width is not None and camera.height is not None:
+                fs.write("image_width", int(camera.width))
+                fs.write("image_height", int(camera.height))
             fs.write("camera_matrix", np.asarray(camera.K, dtype=np.float64))
             fs.write("distortion_coefficients", np.asarray(camera.dist, dtype=np.float64).reshape(-1, 1))
             if camera.rms is not None:

@@ -99,6 +99,12 @@ def _warn_rig(rig: Rig) -> None:
         err_console.print(f"topside: warning: {warning}", markup=False)
 
 
+def _warn_lines(lines: tuple[str, ...] | list[str]) -> None:
+    """Warnings met while working (a calibration's size taken from the first frame), one line each on stderr."""
+    for line in lines:
+        err_console.print(f"topside: warning: {line}", markup=False)
+
+
 def _progress() -> Progress:
     return Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                     TimeElapsedColumn(), console=err_console, transient=True)
@@ -192,6 +198,9 @@ def detect(
     for frame in frames(source):
         n_frames += 1
         det = detector.detect(frame.gray)
+        if cam is not None and not cam.sized:  # a calibration without a size: the first frame's
+            cam, warning = cam.sized_from(frame.gray.shape[1], frame.gray.shape[0], camera, source)
+            _warn_lines([warning])
         if cam is not None and (frame.gray.shape[1], frame.gray.shape[0]) != cam.image_size:
             raise InputError(camera, f"is for {cam.width}x{cam.height} but {source} is "
                              f"{frame.gray.shape[1]}x{frame.gray.shape[0]}", "image_width/image_height")
@@ -287,6 +296,7 @@ def track(
                 for result in track_rig(the_rig, refine, packets=bool(sinks), stats=stats):
                     stats.add(result)
                     progress.advance(task)
+                    _warn_lines(result.warnings)
                     for sink in sinks:
                         sink.on_frame(result)
                     yield from result.offsets
@@ -549,6 +559,8 @@ def live(
             for event in update.events:
                 err_console.print(f"{event.camera}: {event.state}" + (f" ({event.detail})" if event.detail else ""))
             yield from update.estimates
+            for result in update.results:
+                _warn_lines(result.warnings)
             if update.results:
                 start = update.results[0].time if start is None else start
                 if duration is not None and update.results[-1].time - start >= duration:

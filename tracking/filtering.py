@@ -28,18 +28,19 @@ class ConeEstimate:
 
 
 def paper_roles(rig: Rig) -> dict[tuple[str, str], str]:
-    """(cone, face) -> "x" or "y": the face whose marker x axis runs closer to jacket x is the paper's camera 1."""
+    """(cone, face) -> "x" or "y": the face whose outward normal runs closer to jacket y (so that its plane holds jacket
+    x) is the paper's camera 1. By the normal, not the marker's x axis: a marker may be mounted turned about it."""
     roles: dict[tuple[str, str], str] = {}
     by_id = rig.marker_by_id
     faces_by_cone: dict[str, list[tuple[str, np.ndarray]]] = {}
     for pair in rig.all_pairs():
-        x_axis = by_id[pair.jacket].T_body_marker[:3, 0]
-        faces_by_cone.setdefault(pair.cone, []).append((pair.face, x_axis))
+        normal = by_id[pair.jacket].T_body_marker[:3, 2]
+        faces_by_cone.setdefault(pair.cone, []).append((pair.face, normal))
     for cone, faces in faces_by_cone.items():
-        ordered = sorted(faces, key=lambda f: -abs(f[1][0]) + abs(f[1][1]))  # most x-like first, stable
-        for rank, (face, x_axis) in enumerate(ordered):
+        ordered = sorted(faces, key=lambda f: -abs(f[1][1]) + abs(f[1][0]))  # most y-like normal first, stable
+        for rank, (face, normal) in enumerate(ordered):
             if len(ordered) == 1:
-                roles[(cone, face)] = "x" if abs(x_axis[0]) >= abs(x_axis[1]) else "y"
+                roles[(cone, face)] = "x" if abs(normal[1]) >= abs(normal[0]) else "y"
             else:
                 roles[(cone, face)] = "x" if rank == 0 else "y"
     return roles

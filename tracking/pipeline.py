@@ -5,7 +5,7 @@ from __future__ import annotations
 import heapq
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from tracking.camera import CameraModel, load_camera
@@ -39,6 +39,8 @@ class FrameResult:
     unknown_ids: list[int]  # detected ids that the rig does not list
     observation: BodyObservation | None = None  # both bodies' poses and all rig markers' corners, for fusion
     tracked: bool = True  # False: recorded only (not searched, or not fused), to keep up in real time
+    warnings: tuple[str, ...] = ()  # one line each, for the command to print: the calibration's size taken from this
+    # (the camera's first) frame
 
     @property
     def time(self) -> float:
@@ -109,11 +111,19 @@ class CameraTracker:
         return cls(rig, entry, camera, MarkerTracker(detector) if roi_tracking else detector, keep_color, packets)
 
     def process(self, frame: Frame) -> FrameResult:
-        """Detect, estimate poses and the pair offsets of one frame."""
-        if (frame.gray.shape[1], frame.gray.shape[0]) != self.camera.image_size:
-            raise InputError(self.entry.source, f"frame is {frame.gray.shape[1]}x{frame.gray.shape[0]} but the "
-                             f"calibration is for {self.camera.width}x{self.camera.height}", "image size")
-        return self.measure(frame, self.detector.detect(frame.gray, keep_rejected=self.keep_color))
+        """Detect, estimate poses and the pair offsets of one frame; a calibration without a size takes the first
+        frame's (the result carries the warning that says so)."""
+        width, height = frame.gray.shape[1], frame.gray.shape[0]
+        warnings: tuple[str, ...] = ()
+        if not self.camera.sized:
+            self.camera, warning = self.camera.sized_from(width, height, self.rig.resolve(self.entry.calibration),
+                                                          self.entry.source)
+            warnings = (warning,)
+        problem = self.camera.size_problem(width, height)
+        if problem:
+            raise InputError(self.entry.source, problem, "image size")
+        result = self.measure(frame, self.detector.detect(frame.gray, keep_rejected=self.keep_color))
+        return replace(result, warnings=warnings) if warnings else result
 
     def measure(self, frame: Frame, detections: Detections) -> FrameResult:
         """Poses, pair offsets and the body observation of one frame's detections."""

@@ -7,6 +7,24 @@ mated, so every offset is zero when mated.
 A marker's frame is OpenCV's: origin at the marker centre, x to the right and y up as seen by
 someone facing the marker, z out of the face towards that viewer. A marker on face ``astern``
 looks astern (+y); its x axis then points to starboard (-x).
+
+A marker's orientation in its body's frame is given in exactly one of three ways:
+
+- ``face`` (a name from FACE_NORMALS) or ``face`` with ``normal: [x, y, z]`` (any label): marker z is the
+  outward normal, marker y as near up as can be; optionally ``rotation_deg: 90``, the marker turned about its
+  normal by that angle (any angle, degrees), counter-clockwise as seen by someone facing it (riggers mount
+  markers turned: a marker whose printed top points to the left of someone facing it has rotation_deg: 90).
+- ``R: [[r11, r12, r13], [r21, r22, r23], [r31, r32, r33]]``: the rotation R_body_marker, rows as written;
+  its columns are the marker's x, y, z axes in the body's frame (orthonormal, right-handed, to 1e-3).
+- ``quaternion: [w, x, y, z]``: the same rotation as a unit quaternion (Hamilton, scalar first; norm 1 to 1e-3).
+
+With R or quaternion, ``face`` is still required: a label for pairs and reports; a label that names a face of
+FACE_NORMALS must agree with the orientation's z axis within FACE_LABEL_TOLERANCE_DEG.
+
+A camera may carry a surveyed position: ``position: [x, y, z]``, its optical centre in the jacket frame (m),
+with ``position_sigma``, the survey's σ (m, per axis). The fusion filter takes it as a prior on the camera's
+position when it first places the camera; a survey farther than its σ allows from where the camera's markers
+place it is not applied, and is reported (tracking.fusion, `topside check`).
 """
 
 from __future__ import annotations
@@ -63,6 +81,12 @@ DEFAULT_LEG_LENGTH_M = 20.0
 DEFAULT_TOPSIDE_LEG_LENGTH_M = 8.0
 DEFAULT_CONE_HEIGHT_M = 1.5
 PLATE_STANDOFF_M = 0.1  # a marker's plate face stands this far proud of its leg's surface
+ORTHONORMAL_TOLERANCE = 1e-3  # largest |RᵀR - I| entry of a typed R: rows of 4 decimals (0.7071) are within it
+UNIT_TOLERANCE = 1e-3  # largest |norm - 1| of a typed quaternion, for the same reason
+FACE_LABEL_TOLERANCE_DEG = 45.0  # an R or quaternion whose z is farther than this from its named face's normal is
+# a mistyped face or orientation: neighbouring faces (port, port-ahead) are 45° apart, wrong ones 90° or more
+MAX_ROTATION_DEG = 360.0  # a turn about the normal beyond one revolution is a typo
+MAX_POSITION_SIGMA_M = 100.0  # a survey σ beyond this says nothing about a camera tens of metres away
 
 
 def normal_rotation(normal: np.ndarray) -> np.ndarray:
@@ -79,34 +103,111 @@ def face_rotation(face: str) -> np.ndarray:
     return normal_rotation(np.array(FACE_NORMALS[face]))
 
 
+def turned(R: np.ndarray, degrees: float) -> np.ndarray:
+    """R_body_marker (3, 3) of a marker turned about its own z (its outward normal) by degrees, counter-clockwise as
+    seen by someone facing it: R (3, 3) @ Rz(degrees)."""
+    a = np.deg2rad(degrees)
+    c, s = np.cos(a), np.sin(a)
+    return np.asarray(R, dtype=float) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def quaternion_rotation(q: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation matrix of a unit quaternion (4,) [w, x, y, z] (Hamilton, scalar first)."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def nearest_rotation(R: np.ndarray) -> np.ndarray:
+    """The rotation (3, 3) nearest a near-orthonormal matrix (3, 3) (polar decomposition by SVD)."""
+    U, _, Vt = np.linalg.svd(np.asarray(R, dtype=float))
+    return U @ Vt
+
+
+def rotation_problem(R: np.ndarray) -> str | None:
+    """Why a typed matrix (3, 3) is not a rotation to ORTHONORMAL_TOLERANCE, or None when it is one."""
+    R = np.asarray(R, dtype=float)
+    error = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    if error > ORTHONORMAL_TOLERANCE:
+        return (f"not orthonormal (|RᵀR - I| reaches {error:.3g}, expected at most {ORTHONORMAL_TOLERANCE:g}; "
+                "its columns are the marker's x, y, z axes in its body's frame)")
+    if np.linalg.det(R) < 0:
+        return "a reflection (determinant -1; expected the right-handed marker axes x, y, z as its columns)"
+    return None
+
+
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN or inf: an error, not a row
 
 
+Number = Annotated[float, BeforeValidator(_number)]
+
+
 class Marker(_Model):
-    """One ArUco marker: its id, the body it is fixed to, its cone and face, its centre in the body frame."""
+    """One ArUco marker: its id, the body it is fixed to, its cone and face, its centre and orientation in the body
+    frame (the module's docstring gives the three ways of writing the orientation)."""
 
     id: int = Field(ge=0)
     body: Body
     cone: str = Field(min_length=1)
-    face: str = Field(min_length=1)  # a name from FACE_NORMALS, or any label when `normal` is given
+    face: str = Field(min_length=1)  # a name from FACE_NORMALS, or any label when normal, R or quaternion is given
     center: Vec3
     normal: Vec3 | None = None  # outward face normal in the body frame; default: the named face's
+    # turned about its normal by this much, degrees, counter-clockwise as seen facing it (0: y as near up as can be)
+    rotation_deg: Annotated[Number | None, Field(ge=-MAX_ROTATION_DEG, le=MAX_ROTATION_DEG)] = None
+    R: Annotated[list[Annotated[list[Number], Field(min_length=3, max_length=3)]] | None,
+                 Field(min_length=3, max_length=3)] = None  # R_body_marker, rows: columns are marker x, y, z
+    quaternion: Annotated[list[Number] | None, Field(min_length=4, max_length=4)] = None  # [w, x, y, z] of it
 
     @model_validator(mode="after")
     def _face_known(self) -> Marker:
-        if self.normal is None and self.face not in FACE_NORMALS:
+        full = [name for name in ("R", "quaternion") if getattr(self, name) is not None]
+        if len(full) == 2:
+            raise ValueError("quaternion: give R or quaternion, not both (exactly one way of giving the orientation)")
+        if full:
+            for name in ("normal", "rotation_deg"):
+                if getattr(self, name) is not None:
+                    raise ValueError(f"{name}: not with {full[0]} (exactly one way of giving the orientation: "
+                                     f"face with normal and rotation_deg, or R, or quaternion)")
+        if self.R is not None:
+            problem = rotation_problem(np.array(self.R))
+            if problem:
+                raise ValueError(f"R: {problem}")
+        if self.quaternion is not None:
+            norm = float(np.linalg.norm(self.quaternion))
+            if abs(norm - 1.0) > UNIT_TOLERANCE:
+                raise ValueError(f"quaternion: norm {norm:.6g} is not 1 (expected a unit quaternion [w, x, y, z], "
+                                 f"to {UNIT_TOLERANCE:g})")
+        if not full and self.normal is None and self.face not in FACE_NORMALS:
             raise ValueError(f"face: unknown face {self.face!r} (expected one of {', '.join(FACE_NORMALS)}, "
-                             "or give normal: [x, y, z])")
+                             "or give normal: [x, y, z], R or quaternion)")
         if self.normal is not None and np.linalg.norm(self.normal) < 1e-9:
             raise ValueError("normal: must not be zero")
+        if full and self.face in FACE_NORMALS:
+            z = self.R_body_marker[:, 2]
+            angle = float(np.degrees(np.arccos(np.clip(z @ np.array(FACE_NORMALS[self.face]), -1.0, 1.0))))
+            if angle > FACE_LABEL_TOLERANCE_DEG:
+                raise ValueError(f"{full[0]}: its z axis (the outward normal) {np.round(z, 3).tolist()} is "
+                                 f"{angle:.0f}° from face {self.face}'s normal (expected at most "
+                                 f"{FACE_LABEL_TOLERANCE_DEG:.0f}°: a mistyped face or orientation)")
         return self
+
+    @property
+    def R_body_marker(self) -> np.ndarray:
+        """(3, 3) orientation of the marker in its body's frame, from whichever way the rig gives it."""
+        if self.R is not None:
+            return nearest_rotation(np.array(self.R))
+        if self.quaternion is not None:
+            return quaternion_rotation(np.array(self.quaternion))
+        R = normal_rotation(np.array(self.normal)) if self.normal else face_rotation(self.face)
+        return turned(R, self.rotation_deg) if self.rotation_deg else R
 
     @cached_property
     def T_body_marker(self) -> np.ndarray:
         """(4, 4) pose of the marker in its body's frame; computed once (the model is frozen), read-only."""
         T = np.eye(4)
-        T[:3, :3] = normal_rotation(np.array(self.normal)) if self.normal else face_rotation(self.face)
+        T[:3, :3] = self.R_body_marker
         T[:3, 3] = self.center
         T.flags.writeable = False
         return T
@@ -131,6 +232,18 @@ class CameraEntry(_Model):
     # s, added to the video's timestamps to give capture time on the common clock
     time_offset: Annotated[float, BeforeValidator(_number), Field(ge=-MAX_TIME_OFFSET_S, le=MAX_TIME_OFFSET_S)] = 0.0
     mount: Mount = DEFAULT_MOUNT  # how much the camera may move: the fusion filter's motion prior for its pose
+    position: Vec3 | None = None  # surveyed optical centre, jacket frame, m: a prior on the camera's position
+    # σ of that survey per axis, m (required with position)
+    position_sigma: Annotated[Number | None, Field(gt=0, le=MAX_POSITION_SIGMA_M)] = None
+
+    @model_validator(mode="after")
+    def _survey_complete(self) -> CameraEntry:
+        if self.position is not None and self.position_sigma is None:
+            raise ValueError("position_sigma: missing (expected the survey's σ in m with position)")
+        if self.position is None and self.position_sigma is not None:
+            raise ValueError("position: missing (expected the surveyed [x, y, z] in the jacket frame with "
+                             "position_sigma)")
+        return self
 
     @field_validator("source", mode="before")
     @classmethod

@@ -88,8 +88,10 @@ def log_rig(rec: rr.RecordingStream, rig: Rig) -> None:
 
 
 def log_frustum(rec: rr.RecordingStream, path: str, camera: CameraModel) -> None:
-    """Static pinhole of a camera at any entity: a frustum wherever a transform puts it."""
-    rr.log(path, rr.Pinhole(image_from_camera=camera.K, resolution=list(camera.image_size),
+    """Static pinhole of a camera at any entity: a frustum wherever a transform puts it (without a resolution while
+    the calibration has no size and no frame has given one)."""
+    size = camera.image_size
+    rr.log(path, rr.Pinhole(image_from_camera=camera.K, resolution=list(size) if size else None,
                             camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=FRUSTUM_DEPTH_M),
            static=True, recording=rec)
 

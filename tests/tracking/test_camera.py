@@ -25,10 +25,32 @@ def test_round_trip(tmp_path: Path) -> None:
     assert (back.width, back.height, back.rms) == (920, 600, 0.02)
 
 
-def test_missing_field_names_it(shared_data: Path) -> None:
-    # OpenCV's tutorial camera file has no image size
-    with pytest.raises(InputError, match="image_width: missing"):
-        load_camera(shared_data / "aruco/opencv-tutorial/tutorial_camera_params.yml")
+def test_a_file_without_a_size_is_read_without_one(shared_data: Path) -> None:
+    """OpenCV's tutorial camera file has no image size: read as it is, sized by its camera's first frame."""
+    path = shared_data / "aruco/opencv-tutorial/tutorial_camera_params.yml"
+    cam = load_camera(path)
+    assert not cam.sized and cam.image_size is None and cam.width is None
+    assert cam.K[0, 0] == pytest.approx(628.158) and cam.size_problem(640, 480) is None
+    sized, warning = cam.sized_from(640, 480, path, "tutorial.mp4")
+    assert sized.image_size == (640, 480) and sized.sized and not cam.sized  # a new model; the old one unchanged
+    assert warning == (f"{path}: image_width/image_height: not given; took 640x480 from the first frame of "
+                       "tutorial.mp4")
+    assert sized.size_problem(640, 480) is None
+    assert sized.size_problem(1280, 720) == "frame is 1280x720 but the calibration is for 640x480"
+
+
+@pytest.mark.parametrize("missing", ["image_width", "image_height"])
+def test_a_size_half_given_names_the_other_half(tmp_path: Path, missing: str) -> None:
+    text = "\n".join(line for line in GOOD.splitlines() if not line.startswith(missing))
+    with pytest.raises(InputError, match=f"{missing}: missing \\(expected image_width and image_height both"):
+        load_camera(_calibration(tmp_path, text))
+
+
+def test_a_model_without_a_size_saves_without_one(tmp_path: Path) -> None:
+    cam = CameraModel(np.array([[1000.0, 0, 460], [0, 1000, 300], [0, 0, 1]]), np.zeros(5), None, None)
+    save_camera(tmp_path / "c.yaml", cam)
+    assert "image_width" not in (tmp_path / "c.yaml").read_text()
+    assert load_camera(tmp_path / "c.yaml").image_size is None
 
 
 def test_undistort_inverts_project() -> None:
@@ -134,3 +156,60 @@ def test_save_camera_is_atomic(tmp_path: Path) -> None:
     with pytest.raises(Exception):  # noqa: B017 - OpenCV's own error for a value FileStorage cannot write
         save_camera(tmp_path / "d.yaml", cam, extra={"bad": object()})  # type: ignore[dict-item]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]  # a failure leaves nothing, not half a file
+
+
+# --- a calibration without a size, on a real rig: the first frame of its camera gives it -------------------------
+
+def _sizeless_rig(installation: Path, tmp_path: Path) -> Path:
+    """The installation's rig with cam-ahead's calibration stripped of its size (as OpenCV's tutorial files are)."""
+    import yaml
+
+    text = (installation / "calibration/cam-ahead.yaml").read_text()
+    (tmp_path / "sizeless.yaml").write_text("\n".join(line for line in text.splitlines()
+                                                      if not line.startswith(("image_width", "image_height"))))
+    rig = yaml.safe_load((installation / "rig.yaml").read_text())
+    for cam in rig["cameras"]:
+        cam["source"] = str(installation / cam["source"])
+        cam["calibration"] = str(installation / cam["calibration"])
+    rig["cameras"][0]["calibration"] = "sizeless.yaml"
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(rig))
+    return tmp_path / "rig.yaml"
+
+
+def test_the_first_frame_sizes_a_calibration_without_one(installation: Path, tmp_path: Path) -> None:
+    import dataclasses
+
+    from tracking.detection import DEFAULT_REFINEMENT
+    from tracking.pipeline import CameraTracker, track_rig
+    from tracking.rig import load_rig
+
+    rig = load_rig(_sizeless_rig(installation, tmp_path))
+    results = list(track_rig(rig))
+    warned = [(r.camera, r.frame.index, w) for r in results for w in r.warnings]
+    assert warned == [("cam-ahead", 0, f"{tmp_path / 'sizeless.yaml'}: image_width/image_height: not given; took "
+                                       f"920x600 from the first frame of {installation / 'cam-ahead.mp4'}")]
+    assert all(r.poses for r in results)  # poses as with the sized file
+    tracker = CameraTracker.from_rig(rig, rig.cameras[0], DEFAULT_REFINEMENT)
+    first = next(iter(results))
+    assert tracker.process(first.frame).warnings and tracker.camera.image_size == (920, 600)
+    small = dataclasses.replace(first.frame, gray=first.frame.gray[:480, :640])
+    with pytest.raises(InputError, match="image size: frame is 640x480 but the calibration is for 920x600"):
+        tracker.process(small)  # a later frame of another size is still an error
+
+
+def test_track_and_detect_warn_once_for_a_calibration_without_a_size(installation: Path, tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    rig = _sizeless_rig(installation, tmp_path)
+    warning = f"topside: warning: {tmp_path / 'sizeless.yaml'}: image_width/image_height: not given; took 920x600"
+    track = subprocess.run([sys.executable, "-m", "tracking.cli", "track", "--rig", str(rig), "--mode", "raw", "-o",
+                            str(tmp_path / "out.csv")], capture_output=True, text=True, timeout=120)
+    assert track.returncode == 0, track.stderr
+    assert track.stderr.count(warning) == 1
+    detect = subprocess.run([sys.executable, "-m", "tracking.cli", "detect", str(installation / "cam-ahead.mp4"),
+                             "--camera", str(tmp_path / "sizeless.yaml"), "--json"], capture_output=True, text=True,
+                            timeout=120)
+    assert detect.returncode == 0, detect.stderr
+    assert detect.stderr.count("image_width/image_height: not given; took 920x600 from the first frame of") == 1
+    assert '"pose"' in detect.stdout

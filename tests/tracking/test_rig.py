@@ -165,3 +165,92 @@ def test_save_rig_is_atomic(tmp_path: Path) -> None:
     save_rig(out, rig)
     assert load_rig(out).model_dump() == rig.model_dump()
     assert sorted(p.name for p in out.parent.iterdir()) == ["saved.yaml"]  # no temporary file left
+
+
+# --- markers turned about their normal, or given a full orientation ------------------------------------------------
+
+def _with_marker(tmp_path: Path, **fields) -> Path:
+    import copy
+
+    data = copy.deepcopy(RIG)
+    data["markers"][0].update(fields)
+    return _write(tmp_path, data)
+
+
+def test_rotation_deg_turns_the_marker_about_its_normal(tmp_path: Path) -> None:
+    from tracking.rig import turned
+
+    upright = face_rotation("ahead")
+    for angle in (90.0, 37.0, -123.5):
+        R = load_rig(_with_marker(tmp_path, rotation_deg=angle)).markers[0].T_body_marker[:3, :3]
+        np.testing.assert_allclose(R[:, 2], upright[:, 2], atol=1e-12)  # the normal stays
+        a = np.deg2rad(angle)  # counter-clockwise as seen facing it: x turns towards y
+        np.testing.assert_allclose(R[:, 0], np.cos(a) * upright[:, 0] + np.sin(a) * upright[:, 1], atol=1e-12)
+        np.testing.assert_allclose(R, turned(upright, angle), atol=1e-12)
+    R90 = load_rig(_with_marker(tmp_path, rotation_deg=90)).markers[0].T_body_marker[:3, :3]
+    np.testing.assert_allclose(R90[:, 0], [0, 0, 1], atol=1e-12)  # printed top to the left: x points up
+
+
+def test_R_and_quaternion_give_the_same_orientation(tmp_path: Path) -> None:
+    turned37 = load_rig(_with_marker(tmp_path, rotation_deg=37)).markers[0].T_body_marker[:3, :3]
+    typed = np.round(turned37, 4).tolist()  # as a person types it: four decimals
+    by_matrix = load_rig(_with_marker(tmp_path, R=typed)).markers[0].T_body_marker[:3, :3]
+    np.testing.assert_allclose(by_matrix, turned37, atol=1e-4)
+    np.testing.assert_allclose(by_matrix.T @ by_matrix, np.eye(3), atol=1e-12)  # made exactly orthonormal
+    w = np.sqrt(1 + np.trace(turned37)) / 2
+    q = [w, (turned37[2, 1] - turned37[1, 2]) / (4 * w), (turned37[0, 2] - turned37[2, 0]) / (4 * w),
+         (turned37[1, 0] - turned37[0, 1]) / (4 * w)]
+    by_quaternion = load_rig(_with_marker(tmp_path, quaternion=np.round(q, 5).tolist())).markers[0]
+    np.testing.assert_allclose(by_quaternion.T_body_marker[:3, :3], turned37, atol=1e-4)
+    labelled = load_rig(_with_marker(tmp_path, face="plate-7", R=typed)).markers[0]  # any label with R
+    assert labelled.face == "plate-7"
+
+
+UPRIGHT_AHEAD = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # face ahead's R: x to port, y up, z ahead
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    ({"R": [[1, 0, 0], [0, 0.5, -1], [0, 1, 0]]}, "markers[0].R: not orthonormal (|RᵀR - I| reaches"),
+    ({"R": [[-1, 0, 0], [0, 0, -1], [0, 1, 0]]}, "markers[0].R: a reflection (determinant -1"),
+    ({"R": [[1, 0, 0], [0, 0, 1], [0, -1, 0]]}, "markers[0].R: its z axis (the outward normal) [0.0, 1.0, 0.0] is "
+                                                "180° from face ahead's normal"),
+    ({"R": [[1, 0, 0], [0, 0, -1]]}, "markers[0].R: List should have at least 3 items"),
+    ({"R": [[1, 0, 0], [0, 0, float("nan")], [0, 1, 0]]}, "markers[0].R[1][2]: Input should be a finite number"),
+    ({"quaternion": [1, 1, 0, 0]}, "markers[0].quaternion: norm 1.41421 is not 1 (expected a unit quaternion"),
+    ({"quaternion": [1, 0, 0]}, "markers[0].quaternion: List should have at least 4 items"),
+    ({"quaternion": [0.7071, 0.7071, 0, 0], "R": UPRIGHT_AHEAD}, "markers[0].quaternion: give R or quaternion, not "
+                                                                 "both"),
+    ({"R": UPRIGHT_AHEAD, "rotation_deg": 10}, "markers[0].rotation_deg: not with R (exactly one way"),
+    ({"quaternion": [0.7071, 0.7071, 0, 0], "normal": [0, -1, 0]}, "markers[0].normal: not with quaternion"),
+    ({"rotation_deg": 400}, "markers[0].rotation_deg: Input should be less than or equal to 360"),
+    ({"rotation_deg": True}, "markers[0].rotation_deg: expected a number, got true"),
+    ({"rotation_deg": float("inf")}, "markers[0].rotation_deg: Input should be a finite number"),
+    ({"face": "plate-7"}, "markers[0].face: unknown face 'plate-7' (expected one of port"),
+])
+def test_bad_orientation_names_the_field(tmp_path: Path, fields: dict, message: str) -> None:
+    with pytest.raises(InputError) as info:
+        load_rig(_with_marker(tmp_path, **fields))
+    assert message in str(info.value)
+    assert str(info.value).startswith(str(tmp_path / "rig.yaml")) and len(str(info.value).splitlines()) == 1
+
+
+def test_a_surveyed_camera_position(tmp_path: Path) -> None:
+    data = {**RIG, "cameras": [{**RIG["cameras"][0], "mount": "fixed", "position": [-10.0, -40.0, 2.0],
+                                "position_sigma": 0.05}]}
+    cam = load_rig(_write(tmp_path, data)).cameras[0]
+    assert cam.position == [-10.0, -40.0, 2.0] and cam.position_sigma == 0.05
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    ({"position": [1.0, 2.0, 3.0]}, "cameras[0].position_sigma: missing (expected the survey's σ in m with position)"),
+    ({"position_sigma": 0.1}, "cameras[0].position: missing (expected the surveyed [x, y, z]"),
+    ({"position": [1.0, 2.0, 3.0], "position_sigma": 0}, "cameras[0].position_sigma: Input should be greater than 0"),
+    ({"position": [1.0, 2.0, 3.0], "position_sigma": 1000}, "cameras[0].position_sigma: Input should be less than"),
+    ({"position": [1.0, float("nan"), 3.0], "position_sigma": 0.1}, "cameras[0].position[1]: Input should be a finite"),
+    ({"position": [1.0, 2.0], "position_sigma": 0.1}, "cameras[0].position: List should have at least 3 items"),
+])
+def test_bad_camera_survey_names_the_field(tmp_path: Path, fields: dict, message: str) -> None:
+    data = {**RIG, "cameras": [{**RIG["cameras"][0], **fields}]}
+    with pytest.raises(InputError) as info:
+        load_rig(_write(tmp_path, data))
+    assert message in str(info.value) and len(str(info.value).splitlines()) == 1
