@@ -109,6 +109,9 @@ PLACEMENT_FIT_P = 0.99  # a view places a camera or the topside only if its pose
 # CORNER_NOISE_PX would at this probability (χ² of the RMS over 8 N - 6 degrees of freedom, N markers): nothing
 # else checks the first view. One rain-hit corner (2.7 px) in the view that placed a stern camera left an
 # RMS of 0.35 px (clean views: 0.03 median) and put the topside 145 mm off at 6σ (procedure 3, CRF 16)
+SURVEY_GATE_CHI2 = GATE_CHI2[3]  # a camera's surveyed position (rig: position, position_sigma) is applied when its
+# first view places it, unless it lies beyond this (99.9 %, 3 degrees of freedom) from that placement: a survey of
+# the wrong camera or in another frame is reported (survey_conflicts), not trusted
 
 
 @dataclass(frozen=True)
@@ -425,6 +428,8 @@ class TopsideFilter:
     rejected: int = 0  # total gated measurements
     consecutive_rejects: int = 0
     last_accepted: dict[str, float] = field(default_factory=dict)  # camera -> capture time of its topside view
+    survey_conflicts: dict[str, float] = field(default_factory=dict)  # camera -> distance, m, between its surveyed
+    # position and where its first view placed it, for a survey beyond SURVEY_GATE_CHI2 (not applied)
 
     def __post_init__(self) -> None:
         self.cameras = {c.name: CameraState(STATE * (1 + k), c.mount, c.name) for k, c in enumerate(self.rig.cameras)}
@@ -445,6 +450,8 @@ class TopsideFilter:
         markers = self.rig.marker_by_id
         self.topside_points = {m.id: np.array(m.center) for m in markers.values() if m.body == "topside"}
         self.cones = cone_points(self.rig)
+        self.surveys = {c.name: (np.array(c.position, dtype=float), float(c.position_sigma)) for c in self.rig.cameras
+                        if c.position is not None and c.position_sigma is not None}  # camera -> (position (3,), σ m)
 
     @property
     def size(self) -> int:
@@ -699,7 +706,25 @@ class TopsideFilter:
         cam.T_jacket_camera = T_jc
         floor = np.diag([ROTATION_FLOOR_RAD**2] * 3 + [MEASUREMENT_FLOOR_M**2] * 3)
         self._reset_camera(cam, J @ cov @ J.T + floor)
+        self._apply_survey(cam, (J @ cov @ J.T)[3:, 3:] / PLACEMENT_GAIN + floor[3:, 3:])
         return True
+
+    def _apply_survey(self, cam: CameraState, placed: np.ndarray) -> None:
+        """The camera's surveyed position as a measurement of its just placed pose, gated against the placement's own
+        (3, 3) position covariance (placed, without PLACEMENT_GAIN); a conflict is kept in survey_conflicts."""
+        if cam.name not in self.surveys:
+            return
+        assert self.x is not None and cam.T_jacket_camera is not None
+        position, sigma = self.surveys[cam.name]
+        y = position - (cam.T_jacket_camera[:3, 3] + self.x[cam.index + 3:cam.index + 6])
+        R = sigma**2 * np.eye(3)
+        if float(y @ np.linalg.solve(placed + R, y)) > SURVEY_GATE_CHI2:
+            self.survey_conflicts[cam.name] = float(np.linalg.norm(y))
+            return
+        self.survey_conflicts.pop(cam.name, None)
+        H = np.zeros((3, self.size))
+        H[:, cam.index + 3:cam.index + 6] = np.eye(3)
+        self._apply(H, y, R)
 
     def _place_topside(self, cam: CameraState, topside: BodyPose) -> bool:
         """First view of the topside: its pose from the placed camera (the option hanging nearest level)."""
