@@ -87,6 +87,9 @@ FACE_LABEL_TOLERANCE_DEG = 45.0  # an R or quaternion whose z is farther than th
 # a mistyped face or orientation: neighbouring faces (port, port-ahead) are 45° apart, wrong ones 90° or more
 MAX_ROTATION_DEG = 360.0  # a turn about the normal beyond one revolution is a typo
 MAX_POSITION_SIGMA_M = 100.0  # a survey σ beyond this says nothing about a camera tens of metres away
+MAX_MARKER_SIGMA_M = 1.0  # a marker's survey σ beyond this is not a survey (markers are placed to centimetres)
+MAX_MARKER_SIGMA_DEG = 30.0  # nor a tilt σ beyond this
+MAX_TIME_SIGMA_S = 3600.0  # a clock σ beyond an hour is no estimate
 
 
 def normal_rotation(normal: np.ndarray) -> np.ndarray:
@@ -142,6 +145,32 @@ class _Model(BaseModel):
 
 
 Number = Annotated[float, BeforeValidator(_number)]
+MarkerSigmaM = Annotated[Number, Field(ge=0, le=MAX_MARKER_SIGMA_M)]
+MarkerSigmaDeg = Annotated[Number, Field(ge=0, le=MAX_MARKER_SIGMA_DEG)]
+
+
+class SurveySigma(_Model):
+    """How well markers' poses in their bodies' frames are known: 1σ of a centre (m) and of a rotation about each axis
+    (degrees), body frame; one number for every axis or one per axis."""
+
+    position_m: MarkerSigmaM | Annotated[list[MarkerSigmaM], Field(min_length=3, max_length=3)] = 0.0
+    tilt_deg: MarkerSigmaDeg | Annotated[list[MarkerSigmaDeg], Field(min_length=3, max_length=3)] = 0.0
+
+    def position(self) -> np.ndarray:
+        """(3,) σ of the centre along the body's axes, m."""
+        return np.broadcast_to(np.asarray(self.position_m, dtype=float), (3,)).copy()
+
+    def tilt_rad(self) -> np.ndarray:
+        """(3,) σ of the rotation about the body's axes, rad."""
+        return np.radians(np.broadcast_to(np.asarray(self.tilt_deg, dtype=float), (3,)))
+
+
+class SurveyCorrection(_Model):
+    """What `topside survey` moved a marker by (a record; the tracker uses the marker's center and R): its centre
+    (m) and its rotation vector (degrees), body frame."""
+
+    position_m: Vec3
+    rotation_deg: Vec3
 
 
 class Marker(_Model):
@@ -159,6 +188,9 @@ class Marker(_Model):
     R: Annotated[list[Annotated[list[Number], Field(min_length=3, max_length=3)]] | None,
                  Field(min_length=3, max_length=3)] = None  # R_body_marker, rows: columns are marker x, y, z
     quaternion: Annotated[list[Number] | None, Field(min_length=4, max_length=4)] = None  # [w, x, y, z] of it
+    reference: bool = False  # its body's datum: `topside survey` holds it where it is, the filter takes it as exact
+    sigma: SurveySigma | None = None  # how well its pose is known (default: the rig's survey_sigma)
+    correction: SurveyCorrection | None = None  # what `topside survey` moved it by (a record only)
 
     @model_validator(mode="after")
     def _face_known(self) -> Marker:
@@ -235,6 +267,8 @@ class CameraEntry(_Model):
     position: Vec3 | None = None  # surveyed optical centre, jacket frame, m: a prior on the camera's position
     # σ of that survey per axis, m (required with position)
     position_sigma: Annotated[Number | None, Field(gt=0, le=MAX_POSITION_SIGMA_M)] = None
+    # σ of time_offset against the other cameras' clocks, s (`topside sync` writes it; unset: unknown, taken as exact)
+    time_offset_sigma: Annotated[Number | None, Field(ge=0, le=MAX_TIME_SIGMA_S)] = None
 
     @model_validator(mode="after")
     def _survey_complete(self) -> CameraEntry:
@@ -275,6 +309,9 @@ class Rig(_Model):
     # topside leg from its bottom (at the cone tip when mated) to the deck (default DEFAULT_TOPSIDE_LEG_LENGTH_M)
     cone_height: Annotated[float | None, BeforeValidator(_number), Field(gt=0, le=MAX_MARKER_SIZE_M)] = None
     # stabbing cone from its base on the leg top to its tip (default DEFAULT_CONE_HEIGHT_M)
+    survey_sigma: SurveySigma | None = None  # how well the survey placed every marker without a sigma of its own; the
+    # fusion filter widens its σ by it (unset: the markers are taken as exact)
+    survey_tolerance: SurveySigma | None = None  # a marker `topside survey` moves farther than this is flagged
     path: Path = Field(default=Path("rig.yaml"), exclude=True)  # the file it was read from
     warnings: tuple[str, ...] = Field(default=(), exclude=True)  # one line each, set by load_rig, for the CLI to print
 
@@ -323,6 +360,12 @@ class Rig(_Model):
     def _derived_mated(self, pair: Pair) -> np.ndarray:
         by_id = self.marker_by_id
         return np.array(by_id[pair.topside].center) - np.array(by_id[pair.jacket].center)
+
+    def marker_sigma(self, marker: Marker) -> SurveySigma | None:
+        """How well a marker's pose is known: its own sigma, else none for a reference, else the rig's survey_sigma."""
+        if marker.sigma is not None:
+            return marker.sigma
+        return None if marker.reference else self.survey_sigma
 
     @property
     def marker_by_id(self) -> dict[int, Marker]:
