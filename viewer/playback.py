@@ -431,7 +431,14 @@ def window_recording(recording: Path, start: float | None, end: float | None, wo
     _rerun(["rrd", "split", "-o", str(split), "--timeline", "capture_time",
             *[a for t in cuts for a in ("-t", str(round(t * 1e9)))], str(merged)], recording)
     parts = sorted(split.glob("*.rrd"), key=lambda p: _part_start(p.stem, merged.stem))
-    return parts[1] if start is not None else parts[0]
+    part = parts[1] if start is not None else parts[0]
+    layout = index.with_name(index.name.removesuffix(".segments.csv") + ".rbl") if index else None
+    if layout is None or not layout.is_file():
+        return part
+    # `rrd split` leaves the part an empty layout: the session's own (live.rbl) goes back in
+    window = work / "window.rrd"
+    _rerun(["rrd", "merge", str(layout), str(part), "-o", str(window)], recording)
+    return window
 
 
 def _part_start(name: str, stem: str) -> float:
