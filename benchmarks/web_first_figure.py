@@ -48,6 +48,9 @@ OPEN_AFTER_S = 4.0  # the tablet's page is opened this long into the live sessio
 TIMEOUT_S = 120.0
 TARGET_LIVE_S = 5.0
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]
+# A 2560x1600 page at device scale 1. At device scale 2 (such a tablet's 1280x800 CSS pixels) headless Chromium gave
+# Rerun's canvas 1280x800 pixels and its UI laid out in 640x400 points: everything twice as large, figures cut off.
+LARGE_TABLET = {"width": 2560, "height": 1600}
 
 
 @dataclass
@@ -129,10 +132,10 @@ def serving(cmd: list[str], marker: str) -> Iterator[Served]:
             proc.communicate()
 
 
-def open_page(url: str, cones: list[str], case: str, scale: float = 1.0, shot: Path | None = None,
-              live_start: float | None = None) -> Timing:
-    """Open the page and time its phases; a screenshot of the figure when asked."""
-    with web_viewer(url, TABLET, scale) as page:
+def open_page(url: str, cones: list[str], case: str, viewport: dict[str, int] | None = None,
+              shot: Path | None = None, live_start: float | None = None) -> Timing:
+    """Open the page (at the tablet's size unless told) and time its phases; a screenshot of the figure when asked."""
+    with web_viewer(url, viewport or TABLET) as page:
         page.page.wait_for_function("() => window._handle !== undefined", timeout=TIMEOUT_S * 1000)
         handle = time.monotonic() - page.opened
         page_renderer = page.renderer()
@@ -165,14 +168,14 @@ def live_runs(scene: Path, repeats: int, screenshots: Path | None) -> list[Timin
                 while served.printed(suffix=": live") is None:  # a camera's first frame: capture time ~0
                     time.sleep(0.05)
                 time.sleep(OPEN_AFTER_S)  # into the replay
-                shot, scale = None, 1.0
+                shot, viewport = None, TABLET
                 if screenshots is not None and scope == "superintendent" and k >= repeats:
-                    scale = 1.0 if k == repeats else 2.0  # 1280x800 CSS pixels, then a 2560x1600 screen
-                    shot = screenshots / f"superintendent-tablet-{1280 * int(scale)}x{800 * int(scale)}.png"
-                size = f", {1280 * int(scale)}×{800 * int(scale)} px" if shot is not None else ""
+                    viewport = TABLET if k == repeats else LARGE_TABLET
+                    shot = screenshots / f"superintendent-tablet-{viewport['width']}x{viewport['height']}.png"
+                size = f", {viewport['width']}×{viewport['height']}" if shot is not None else ""
                 timing = open_page(served.url, cones,
-                                   f"live, --viewer-scope {scope}{size}, page opened {OPEN_AFTER_S:g} s in", scale,
-                                   shot, served.printed(suffix=": live"))
+                                   f"live, --viewer-scope {scope}{size}, page opened {OPEN_AFTER_S:g} s in",
+                                   viewport, shot, served.printed(suffix=": live"))
             out.append(timing)
             print(timing, flush=True)
             remove_tree(work)

@@ -9,6 +9,7 @@
 #       (e.g. f0.75, the default).
 # Env:  SIZE=1600x1000 (window size in points; the PNG is this many pixels)
 #       SETTLE=5       (seconds to wait after seeking, so on-demand chunks arrive and render)
+#       VIEW=<view name> (only that view, e.g. VIEW="installation (jacket frame)"; default: the whole window)
 #       TIMELINE=capture_time, PY=<python with rerun-sdk> (default: the project venv),
 #       RERUN=<rerun viewer binary> (default: the one inside PY's rerun-sdk)
 #
@@ -26,7 +27,7 @@
 set -euo pipefail
 
 if [[ $# -lt 2 ]]; then
-    sed -n '2,13p' "$0" >&2
+    sed -n '2,14p' "$0" >&2
     exit 2
 fi
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -36,6 +37,7 @@ TIME="${3:-f0.75}"
 SIZE="${SIZE:-1600x1000}"
 SETTLE="${SETTLE:-5}"
 TIMELINE="${TIMELINE:-capture_time}"
+VIEW="${VIEW:-}"
 PY="${PY:-$HERE/../.venv/bin/python}"
 # The real viewer binary, not the venv's `rerun` wrapper: the wrapper runs it as a child process,
 # so killing the wrapper would leave the viewer running.
@@ -56,11 +58,11 @@ export PATH="$("$PY" -c 'import os; from viewer.playback import viewer_env; prin
 VIEWER=$!
 trap 'kill "$VIEWER" 2>/dev/null || true; wait "$VIEWER" 2>/dev/null || true; rm -rf "$TMP"' EXIT
 
-if ! "$PY" - "$PORT" "$RRD" "$OUT" "$TIME" "$TIMELINE" "$SETTLE" <<'EOF'
+if ! "$PY" - "$PORT" "$RRD" "$OUT" "$TIME" "$TIMELINE" "$SETTLE" "$VIEW" <<'EOF'
 import os, sys, time
 from rerun.experimental import ViewerClient
 
-port, rrd, out, when, timeline, settle = sys.argv[1:7]
+port, rrd, out, when, timeline, settle, view_name = sys.argv[1:8]
 deadline = time.monotonic() + 60
 while True:  # the viewer takes a moment to listen
     try:
@@ -96,8 +98,13 @@ state = viewer.get_state()
 for view in state.views:
     for report in view.reports:
         print(f"view {view.name!r} ({view.origin}): {report.severity}: {report.summary}", file=sys.stderr)
-viewer.save_screenshot(out)
-print(f"{out}: {os.path.basename(rrd)} at {timeline}={value} ({len(state.views)} views)")
+view_id = None
+if view_name:
+    view_id = next((v.view_id for v in state.views if v.name == view_name), None)
+    if view_id is None:
+        sys.exit(f"no view {view_name!r}: {[v.name for v in state.views]}")
+viewer.save_screenshot(out, view_id)
+print(f"{out}: {os.path.basename(rrd)} at {timeline}={value} ({view_name or f'{len(state.views)} views'})")
 EOF
 then
     echo "--- viewer log ---" >&2

@@ -44,6 +44,7 @@ STATE_RING_PX = 3.0  # the state ring's half-width, UI points (the same on every
 TREND_S = 60.0
 WHY_Y_MM = 0.5 * TOLERANCE_MM  # NO DATA's reason: inside the ring, below its centre (clear of the compass words)
 NOWHERE = np.zeros((0, 2))  # an empty batch: the part is gone from the view from this time on
+NO_LABELS: list[str] = []  # logged, not left out: the viewer would otherwise keep an earlier row's label
 TARGET_COLORS = {"green": (40, 200, 80), "amber": (255, 170, 0), "red": (230, 40, 40), "none": (140, 140, 140)}
 RING_COLOR = (200, 200, 200)
 TOLERANCE_LINE_COLOR = (230, 40, 40)
@@ -52,7 +53,7 @@ TREND_COLOR = (40, 120, 230)  # reads on the web viewer's light theme and the na
 # Words, not emoji or arrows: the viewer's font (Inter) lacks them, and a missing glyph makes the native viewer panic.
 CAMERA_WORDS = {CameraState.STARTING: "starting", CameraState.LIVE: "LIVE", CameraState.FROZEN: "FROZEN",
                 CameraState.LOST: "LOST", CameraState.ENDED: "ended"}
-ROW_SHARES = [3, 3, 4, 2]  # figures, image, bull's-eye, trend: the same in every column
+ROW_SHARES = [3.5, 2.5, 4, 2]  # figures, image, bull's-eye, trend: the same in every column
 
 
 class ConeState(StrEnum):
@@ -111,9 +112,8 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
                 else f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)")
     if short:
         return f"σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm"
-    return ("the cameras do not see this cone well enough (1σ above "
-            f"{REPORT_MAX_SIGMA_M * 1e3:.0f} mm; {REPORT_WARMUP_SIGMA_M * 1e3:.0f} mm in the first "
-            f"{REPORT_WARMUP_S:g} s after the topside is placed)")
+    return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_M * 1e3:.0f} mm in the first "
+            f"{REPORT_WARMUP_S:g} s after the topside is placed): the cameras do not see this cone well enough")
 
 
 def cone_markdown(reading: ConeReading, stale_s: float = STALE_S) -> str:
@@ -199,7 +199,8 @@ def log_cone_reading(rec: rr.RecordingStream, reading: ConeReading, now: float, 
     label = f"{mm:.0f} mm"
     if mm > TOLERANCE_MM:  # beyond the ring: on the ring, with an arrow the way it is off
         u = xy / np.hypot(*xy)
-        rr.log(f"{base}/offset", rr.Points2D([u * TOLERANCE_MM], radii=dot, colors=color), recording=rec)
+        rr.log(f"{base}/offset", rr.Points2D([u * TOLERANCE_MM], radii=dot, colors=color, labels=NO_LABELS),
+               recording=rec)
         rr.log(f"{base}/beyond", rr.Arrows2D(origins=[u * TOLERANCE_MM], vectors=[u * ARROW_MM], colors=color,
                                              radii=rr.components.Radius.ui_points(2.5), labels=[label]),
                recording=rec)
