@@ -610,7 +610,8 @@ def simulate(
     """Render a scenario: one video per camera, the rig, calibration files and the ground-truth log.
 
     Built-ins: config1-procedure1..4, config2-procedure5..7, config1-setdown, config2-setdown,
-    config1-cone-a (markers at cone A only), calibration-shots; add -weather (fog 50 %, rain 30 %) or -clear (no weather, no noise).
+    config1-cone-a (markers at cone A only), calibration-shots;
+    add -weather (fog 50 %, rain 30 %) or -clear (no weather, no noise).
     """
     from tracking.sim.command import run_simulate
 
