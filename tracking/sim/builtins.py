@@ -6,7 +6,9 @@ four stern cameras (one per pair), and one drone on a pair of rear cone C. Confi
 `config1-cone-a` keeps only cone A's pairs and their stern cameras (not in the paper).
 
 Name suffixes: `-weather` adds the paper's fog 50 % and rain 30 %; `-clear` switches off fog, rain,
-noise, shadows, light changes and motion blur (for exact tests).
+noise, shadows, light changes and motion blur (for exact tests); `-realities` gives every camera a clock off by up
+to ±0.5 s and every marker a survey error of 20 mm and 1° (σ), which the rig does not know. Suffixes combine:
+`config2-setdown-realities-weather`.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from tracking.sim.scenario import (
     PairSpec,
     Scenario,
     SeaSpec,
+    SurveyErrorSpec,
     WeatherSpec,
 )
 from tracking.sim.scene import Layout
@@ -163,24 +166,39 @@ BUILTINS: dict[str, Callable[[], Scenario]] = {
     "config2-setdown": lambda: procedure_scenario(2, "setdown"),
     "config1-cone-a": one_cone_scenario,
     "calibration-shots": calibration_scenario,
-}
+}  # and with -realities (below): config2-setdown-realities, config1-procedure1-realities, config2-procedure5-realities
 CLEAR_WEATHER = {"fog": 0.0, "rain": 0.0, "noise": 0.0, "shadows": 0.0, "light_variation": 0.0,
                  "motion_blur": False}
+REALITIES_CLOCK_S = 0.5  # a drone's video clock can be off by tenths of a second from the stern cameras'
+REALITIES_SURVEY = {"position_m": 0.02, "tilt_deg": 1.0}  # riggers' mounting and its survey: 1-2 cm, a degree
 
 
 def builtin_names() -> list[str]:
-    """Names of the built-in scenarios (each also with -weather and -clear)."""
+    """Names of the built-in scenarios (each also with -weather, -clear and -realities)."""
     return list(BUILTINS)
 
 
+def _realities(base: Scenario) -> Scenario:
+    return base.model_copy(update={"clock_error_s": REALITIES_CLOCK_S,
+                                   "survey_error": SurveyErrorSpec(**REALITIES_SURVEY)})
+
+
+SUFFIXES: dict[str, Callable[[Scenario], Scenario]] = {
+    "-weather": lambda base: base.model_copy(update={"weather": base.weather.model_copy(update=PAPER_WEATHER)}),
+    "-clear": lambda base: base.model_copy(update={"weather": base.weather.model_copy(update=CLEAR_WEATHER)}),
+    "-realities": _realities,
+}
+
+
 def builtin_scenario(name: str, missing_ok: bool = False) -> Scenario | None:
-    """A built-in scenario by name, with an optional -weather or -clear suffix."""
-    for suffix, weather in (("-weather", PAPER_WEATHER), ("-clear", CLEAR_WEATHER)):
-        if name.endswith(suffix) and name.removesuffix(suffix) in BUILTINS:
-            base = BUILTINS[name.removesuffix(suffix)]()
-            return base.model_copy(update={"name": name, "weather": base.weather.model_copy(update=weather)})
+    """A built-in scenario by name, with optional -weather, -clear or -realities suffixes (in any order)."""
     if name in BUILTINS:
         return BUILTINS[name]()
+    for suffix, change in SUFFIXES.items():
+        if name.endswith(suffix):
+            base = builtin_scenario(name.removesuffix(suffix), missing_ok=True)
+            if base is not None:
+                return change(base).model_copy(update={"name": name})
     if missing_ok:
         return None
     raise InputError(name, f"unknown built-in scenario (expected one of {', '.join(BUILTINS)})")

@@ -15,12 +15,14 @@ from tracking.outputs import check_writable, discard, partial_dir, replace_dir
 from tracking.rig import CameraEntry, save_rig
 from tracking.sim.motion import CranePath
 from tracking.sim.render import CameraRenderer
-from tracking.sim.scenario import CameraSpec, Scenario, dump_scenario, load_scenario
+from tracking.sim.scenario import CameraSpec, Scenario, dump_scenario, load_scenario, validate_scenario
 from tracking.sim.truth import frame_rows, truth_table, write_frames
 from tracking.sim.video import TIME_BASE, VideoWriter, pts_of
 from tracking.sim.world import World
 
 MAX_START_OFFSET = 0.5  # s: cameras start up to this late on the common clock
+CLOCK_STREAM = 23  # seed stream of the cameras' clock errors (one generator per camera)
+TRUTH_RIG_FILE = "truth_rig.yaml"  # the rig with the true clocks and marker poses: for benchmarks, never the tracker
 SCENARIO_FILE = "scenario.yaml"  # written last: a folder holding it is a finished simulation's
 
 
@@ -48,6 +50,13 @@ def plan_frames(cam: CameraSpec, index: int, duration: float, seed: int) -> Fram
     keep[:1] = True
     ticks = ticks[keep]
     return FramePlan(offset + ticks * float(TIME_BASE), ticks, offset)
+
+
+def clock_error(sc: Scenario, index: int, seed: int) -> float:
+    """How far camera index's clock is off: true time_offset minus the rig's, s (uniform within ±sc.clock_error_s)."""
+    if sc.clock_error_s == 0.0:
+        return 0.0
+    return round(float(np.random.default_rng([seed, CLOCK_STREAM, index]).uniform(-1.0, 1.0)) * sc.clock_error_s, 6)
 
 
 def effective_duration(scenario: Scenario, duration: float | None) -> float:
@@ -81,14 +90,21 @@ def check_out_folder(out: Path, scenario: str) -> None:
 
 
 def run_simulate(scenario: str, out: Path, seed: int | None = None, duration: float | None = None,
-                 quiet: bool = False) -> dict[str, float]:
-    """Render a scenario (YAML file or built-in name) into out; returns timing figures.
+                 quiet: bool = False, clock_error_s: float | None = None,
+                 survey_error: tuple[float, float] | None = None) -> dict[str, float]:
+    """Render a scenario (YAML file or built-in name) into out; returns timing figures. clock_error_s and survey_error
+    (σ of a marker's centre in m and of its tilt in degrees) replace the scenario's.
 
     Everything is written into a temporary folder beside out, which replaces out (new, empty, or an earlier
     simulation's) only once complete: a failure or Ctrl-C leaves out as it was."""
     sc = load_scenario(scenario)
     if seed is not None:
         sc = sc.model_copy(update={"seed": seed})
+    if clock_error_s is not None:
+        sc = validate_scenario({**sc.model_dump(mode="json"), "clock_error_s": clock_error_s}, "--clock-error")
+    if survey_error is not None:
+        error = {"position_m": survey_error[0], "tilt_deg": survey_error[1]}
+        sc = validate_scenario({**sc.model_dump(mode="json"), "survey_error": error}, "--survey-error")
     if duration is not None and duration <= 0:
         raise InputError("--duration", f"must be positive, got {duration}")
     out = Path(out)
@@ -108,6 +124,19 @@ def run_simulate(scenario: str, out: Path, seed: int | None = None, duration: fl
         raise
     replace_dir(partial, out)
     return figures
+
+
+def write_rigs(sc: Scenario, world: World, out: Path) -> None:
+    """The rig the tracker gets (nominal clocks and marker poses) and the true one (TRUTH_RIG_FILE) of a scenario whose
+    cameras carry their true time_offset."""
+    entries = [CameraEntry(name=c.name, calibration=f"calibration/{c.name}.yaml", source=f"{c.name}.mp4",
+                           time_offset=c.time_offset or 0.0, mount="vessel" if c.kind == "stern" else "drone")
+               for c in sc.cameras]
+    save_rig(out / TRUTH_RIG_FILE, world.rig(entries, true=True))
+    stated = {"time_offset_sigma": round(sc.clock_error_s / np.sqrt(3.0), 6)} if sc.clock_error_s else {}  # uniform
+    nominal = [e.model_copy(update={"time_offset": round(e.time_offset - clock_error(sc, i, sc.seed), 6), **stated})
+               for i, e in enumerate(entries)]  # what the installation believes its clocks are, and how well
+    save_rig(out / "rig.yaml", world.rig(nominal))
 
 
 def render_scenario(sc: Scenario, out: Path, duration: float, quiet: bool = False) -> dict[str, float]:
@@ -145,10 +174,7 @@ def render_scenario(sc: Scenario, out: Path, duration: float, quiet: bool = Fals
                 done += 1
                 progress.update(task, advance=1, fps=done / (time.perf_counter() - t_start))
             writer.close()
-    entries = [CameraEntry(name=c.name, calibration=f"calibration/{c.name}.yaml", source=f"{c.name}.mp4",
-                           time_offset=p.time_offset, mount="vessel" if c.kind == "stern" else "drone")
-               for c, p in zip(cams, plans, strict=True)]
-    save_rig(out / "rig.yaml", world.rig(entries))
+    write_rigs(sc, world, out)
     times = np.arange(0.0, duration + 1e-9, 1.0 / sc.truth_rate)
     truth_table(world, times).to_csv(out / "truth.csv", index=False, float_format="%.6f")
     write_frames(out / "truth_frames.csv", rows)

@@ -142,6 +142,14 @@ class CalibrationSpec(_Model):
         return value
 
 
+class SurveyErrorSpec(_Model):
+    """How far the markers truly sit from where the rig's survey puts them: the σ of a normal draw per marker."""
+
+    position_m: float = Field(0.0, ge=0, le=1)  # σ per axis of a marker centre's displacement in its body frame, m
+    tilt_deg: float = Field(0.0, ge=0, le=10)  # σ per axis of the rotation of its face (normal tilted, face turned),
+    # degrees, about the body's axes
+
+
 class Scenario(_Model):
     """Everything a simulation run renders; reproducible with its seed."""
 
@@ -158,6 +166,9 @@ class Scenario(_Model):
     motion: MotionSpec = MotionSpec(waypoints=[[0.0, 0.0]])
     weather: WeatherSpec = WeatherSpec()
     calibration: CalibrationSpec | None = None  # set: render chessboard shots instead of a procedure
+    clock_error_s: float = Field(0.0, ge=0, le=10)  # each camera's clock is off by a uniform draw within ±this, s:
+    # the rig's time_offset is the nominal (wrong) one, the videos are captured at the true times
+    survey_error: SurveyErrorSpec = SurveyErrorSpec()  # markers sit off their surveyed (rig) poses by this much
 
     @field_validator("dictionary")
     @classmethod

@@ -6,9 +6,12 @@ truth.csv, one row per common-clock time at a uniform rate:
     jacket_{...}               T_jacket_jacket (identity: the jacket frame is the reference)
     vessel_{...}               T_jacket_vessel (midship waterline)
     camera_<name>_{...}        T_jacket_camera (OpenCV camera frame)
-    marker_<id>_{...}          T_jacket_marker (OpenCV ArUco marker frame)
+    marker_<id>_{...}          T_jacket_marker (OpenCV ArUco marker frame), where the marker truly is (survey_error)
     cone_<C>_{dx,dy,dz}        topside cone point minus jacket cone point (the cone tip), jacket frame
     pair_<j>_<t>_{dx,dy,dz}    topside marker centre minus its mated position, jacket frame
+
+A camera's true clock offset is capture_time - pts of its rows in truth_frames.csv (the rig's time_offset is off by
+the scenario's clock error); truth_rig.yaml is the rig with the true clocks and marker poses (benchmarks only).
 
 truth_frames.csv, one row per visible marker per video frame (a frame with none has one row with
 an empty marker_id):
@@ -58,12 +61,12 @@ def truth_table(world, times: np.ndarray) -> pd.DataFrame:  # world: tracking.si
         for name in cams:
             row += T_to_pose(world.motion.camera(name, float(t))).tolist()
         for m in markers:
-            row += T_to_pose(poses[m.body] @ m.T_body_marker).tolist()
+            row += T_to_pose(poses[m.body] @ world.T_body_marker[m.id]).tolist()
         for c in CONES:
             tip = world.layout.cone_tip(c)
             row += (apply(T_top, tip[None])[0] - tip).tolist()
         for p in pairs:
-            c = np.array(by_id[p.topside_id].center)
+            c = world.T_body_marker[by_id[p.topside_id].id][:3, 3]
             row += (apply(T_top, c[None])[0] - c).tolist()
         rows.append(row)
     cols = ["time"]
@@ -87,7 +90,7 @@ def frame_rows(world, cam, K: np.ndarray, dist: np.ndarray, T_jacket_camera: np.
         frac = unoccluded.get(m.id, 0.0)
         if frac < MIN_UNOCCLUDED:
             continue
-        T_cm = T_cj @ poses[m.body] @ m.T_body_marker
+        T_cm = T_cj @ poses[m.body] @ world.T_body_marker[m.id]
         P = apply(T_cm, corners)
         if (P[:, 2] <= 0).any():
             continue

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracking.rig import CameraEntry, Marker, Pair, Rig
+from tracking.rig import CameraEntry, Marker, Pair, Rig, SurveySigma
 from tracking.sim.motion import Motion
 from tracking.sim.render import FrameState, Segment
 from tracking.sim.scenario import CameraSpec, Scenario
@@ -18,7 +18,7 @@ from tracking.sim.scene import (
     vessel_body,
 )
 from tracking.sim.textures import Texture, marker_texture
-from tracking.sim.transforms import apply
+from tracking.sim.transforms import apply, make_T, rotvec_to_R
 from tracking.sim.weather import Light
 
 SLING_ALBEDO = (0.15, 0.15, 0.15)
@@ -28,6 +28,17 @@ BOOM_WIDTH = 3.0  # m
 CRANE_PIVOTS_VESSEL = ((-34.0, 86.0, 42.0), (34.0, 86.0, 42.0))  # vessel frame, m
 LIFT_POINTS = ((-14.0, -10.0), (14.0, -10.0), (14.0, 10.0), (-14.0, 10.0))  # topside frame, on the module roof
 BOOM_TIP_ABOVE_HOOK = 12.0  # m
+SURVEY_STREAM = 29  # seed stream of the markers' survey errors (one generator per marker id)
+
+
+def survey_error(scenario: Scenario, seed: int, marker_id: int) -> tuple[np.ndarray, np.ndarray]:
+    """How far one marker truly sits from its surveyed pose: displacement (3,) m and rotation vector (3,) rad, both in
+    its body's frame (zero without scenario.survey_error)."""
+    spec = scenario.survey_error
+    if spec.position_m == 0.0 and spec.tilt_deg == 0.0:
+        return np.zeros(3), np.zeros(3)
+    rng = np.random.default_rng([seed, SURVEY_STREAM, marker_id])
+    return rng.normal(0.0, spec.position_m, 3), rng.normal(0.0, np.radians(spec.tilt_deg), 3)
 
 
 class World:
@@ -41,9 +52,14 @@ class World:
         self.jacket, self.topside, self.vessel = (jacket_body(self.layout), topside_body(self.layout),
                                                   vessel_body(self.layout))
         self.textures: dict[str, Texture] = {}
+        self.T_body_marker: dict[int, np.ndarray] = {}  # (4, 4) where each marker truly is in its body's frame
         for pair in scenario.pairs:
             for body, mid in ((self.jacket, pair.jacket_id), (self.topside, pair.topside_id)):
                 plate = marker_plate(self.layout, mid, body.name, pair.cone, pair.face, scenario.marker_size)
+                moved, turned = survey_error(scenario, seed, mid)
+                T = plate.T_body_plate
+                plate.T_body_plate = make_T(rotvec_to_R(turned) @ T[:3, :3], T[:3, 3] + moved)
+                self.T_body_marker[mid] = plate.T_body_plate
                 attach_plates(body, [plate])
                 self.textures[plate.key] = marker_texture(scenario.dictionary, mid, scenario.marker_size,
                                                           self.layout.plate_size)
@@ -109,15 +125,27 @@ class World:
                 out.append(Marker(id=mid, body=body, cone=p.cone, face=p.face, center=c.round(6).tolist()))
         return out
 
-    def rig(self, cameras: list[CameraEntry]) -> Rig:
-        """The rig file the tracker gets: cones, markers, pairs with mated offsets, cameras."""
-        markers = self.rig_markers()
+    def true_markers(self) -> list[Marker]:
+        """Markers where they truly are (their survey errors applied), as a rig would list them: R_body_marker."""
+        out = []
+        for m in self.rig_markers():
+            T = self.T_body_marker[m.id]
+            out.append(Marker(id=m.id, body=m.body, cone=m.cone, face=m.face, center=T[:3, 3].round(6).tolist(),
+                              R=T[:3, :3].round(9).tolist()))
+        return out
+
+    def rig(self, cameras: list[CameraEntry], true: bool = False) -> Rig:
+        """The rig file the tracker gets: cones, markers, pairs with mated offsets, cameras, and the survey's stated σ
+        (the scenario's survey_error); true: the markers where they truly are (a perfect survey), benchmarks only."""
+        markers = self.true_markers() if true else self.rig_markers()
         by_id = {m.id: m for m in markers}
         pairs = [Pair(cone=p.cone, face=p.face, jacket=p.jacket_id, topside=p.topside_id,
                       mated=(np.array(by_id[p.topside_id].center) - np.array(by_id[p.jacket_id].center))
                       .round(6).tolist()) for p in self.scenario.pairs]
         cones = sorted(CONE_SIGNS)  # every cone tip, as a user would survey them: the tracker reports them all
+        spec = self.scenario.survey_error
+        stated = None if true or (spec.position_m == 0 and spec.tilt_deg == 0) else SurveySigma(**spec.model_dump())
         return Rig(name=self.scenario.name, dictionary=self.scenario.dictionary,
                    marker_size=self.scenario.marker_size,
                    cones={c: self.layout.cone_tip(c).round(6).tolist() for c in cones},
-                   markers=markers, pairs=pairs, cameras=cameras)
+                   markers=markers, pairs=pairs, cameras=cameras, survey_sigma=stated)
