@@ -606,16 +606,23 @@ def simulate(
     seed: Annotated[int | None, typer.Option(help="Random seed (default: the scenario's).", min=0)] = None,
     duration: Annotated[float | None, typer.Option(help="Cut the scenario to this many seconds.",
                                                    callback=_finite(0.0))] = None,
+    clock_error: Annotated[float | None, typer.Option(
+        help="Every camera's clock off by a uniform draw within ±this many s; the rig keeps the nominal offsets.",
+        callback=_finite(0.0, low_open=False, high=10.0))] = None,
+    survey_error: Annotated[tuple[float, float] | None, typer.Option(
+        help="Markers off their surveyed poses: σ of the centre (m) and of the tilt (°), e.g. 0.02 1; the rig keeps "
+             "the nominal poses.")] = None,
 ) -> None:
     """Render a scenario: one video per camera, the rig, calibration files and the ground-truth log.
 
     Built-ins: config1-procedure1..4, config2-procedure5..7, config1-setdown, config2-setdown,
     config1-cone-a (markers at cone A only), calibration-shots;
-    add -weather (fog 50 %, rain 30 %) or -clear (no weather, no noise).
+    add -weather (fog 50 %, rain 30 %), -clear (no weather, no noise) or -realities (clocks off by up to
+    ±0.5 s, markers 20 mm and 1° off their survey; truth_rig.yaml has the truth, for benchmarks only).
     """
     from tracking.sim.command import run_simulate
 
-    run_simulate(scenario, out, seed=seed, duration=duration)
+    run_simulate(scenario, out, seed=seed, duration=duration, clock_error_s=clock_error, survey_error=survey_error)
 
 
 @app.command()
