@@ -248,13 +248,13 @@ def check_rig(path: Path) -> None:
 
 def check_camera(path: Path) -> None:
     """A calibration that loads has a finite 3x3 K with positive focal lengths, a finite distortion vector of an
-    OpenCV size, a positive image size and a finite RMS >= 0 if any."""
+    OpenCV size, a positive image size or none (sized by the first frame) and a finite RMS >= 0 if any."""
     cam = load_or_refuse(load_camera, path)
     if cam is None:
         return
     assert cam.K.shape == (3, 3) and np.isfinite(cam.K).all() and cam.K[0, 0] > 0 and cam.K[1, 1] > 0
     assert cam.dist.ndim == 1 and cam.dist.size in DISTORTION_SIZES and np.isfinite(cam.dist).all()
-    assert cam.width > 0 and cam.height > 0
+    assert (cam.width is None and cam.height is None) or (cam.width > 0 and cam.height > 0)  # None: sized by a frame
     assert cam.rms is None or (math.isfinite(cam.rms) and cam.rms >= 0)
 
 
