@@ -25,6 +25,7 @@ from tracking.outputs import Outputs, atomic_path, check_outputs
 if TYPE_CHECKING:
     import pandas as pd
 
+    from tracking.check import CheckReport
     from tracking.pipeline import TrackStats
     from tracking.rig import Rig
     from viewer.archive import ArchiveSink
@@ -672,6 +673,150 @@ def evaluate(
         for i, (off, tru) in enumerate(pairs):
             for path in plot_run(off, tru, plots, runs[2 * i].stem):
                 console.print(f"wrote {path}")
+
+
+MAX_CHECK_SECONDS = 600.0  # a check reads this much of each camera at most: minutes are a recording, not a check
+
+
+@app.command()
+def check(
+    rig: Annotated[Path, typer.Option(help="Rig file of the installation.")],
+    seconds: Annotated[float, typer.Option(help="Seconds of each camera to read.",
+                                           callback=_finite(0.0, high=MAX_CHECK_SECONDS))] = 5.0,
+    rrd: Annotated[Path | None, typer.Option(help="Also write a Rerun recording of the installation as understood: "
+                                                  "markers, cones, every camera placed by its markers with its "
+                                                  "first frame.")] = None,
+    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = DEFAULT_REFINEMENT,
+) -> None:
+    """Check a rig on a few seconds of every camera before the lift: what each camera sees, its clock, each cone's
+    predicted σ and verdict (ready, weak, blind), and every marker that disagrees with the rig.
+
+    Exit status: 0 when every cone is ready and nothing disagrees; 1 when a cone is weak or blind, a marker disagrees
+    with the rig, a camera sees no rig marker, its clock is off its rate or its survey is refuted, or an unknown id is
+    seen while a rig marker is not; 2 for bad input.
+    """
+    from tracking.check import check_rig
+    from tracking.rig import load_rig
+
+    the_rig = load_rig(rig)
+    _warn_rig(the_rig)
+    check_outputs({"--rrd": rrd}, rig_inputs(the_rig))
+    with _progress() as progress:
+        progress.add_task(f"reading {seconds:g} s of {len(the_rig.cameras)} cameras", total=None)
+        report = check_rig(the_rig, seconds, refine)
+    _warn_lines(report.warnings)
+    _print_check(report)
+    if rrd is not None:
+        with atomic_path(rrd) as partial:
+            _check_recording(report, partial)
+        console.print(f"wrote {rrd} (open it with: topside view {rrd})")
+    if not report.ready:
+        raise typer.Exit(1)
+
+
+def _print_check(report: CheckReport) -> None:
+    """The check's tables (cameras, markers seen, disagreements, cones), a line per finding, and its verdict."""
+    from rich.table import Table
+
+    rig = report.rig
+    console.print(f"checked {rig.path} ({rig.name}): {len(rig.markers)} markers, {len(report.cones)} cones, "
+                  f"{len(rig.cameras)} cameras, {report.seconds:g} s of each")
+    cams = Table(title="cameras")
+    for col in ("camera", "frames", "fps stated", "fps kept", "dropped", "irregular", "markers", "survey [m]"):
+        cams.add_column(col, justify="left" if col in ("camera", "markers") else "right")
+    for c in report.cameras:
+        k = c.clock
+        survey = "–" if c.survey_m is None else f"{c.survey_m:.2f}" + (" refused" if c.survey_conflict else "")
+        cams.add_row(c.camera, str(k.frames), f"{k.declared_fps:.3f}",
+                     f"{k.measured_fps:.3f}" if np.isfinite(k.measured_fps) else "–", str(k.dropped),
+                     str(k.irregular), " ".join(str(s.marker) for s in c.sights) or "none", survey)
+    console.print(cams)
+    for c in report.cameras:
+        for line in c.problems:
+            console.print(line)
+    markers = Table(title="markers seen (medians over the frames that show them)")
+    for col in ("camera", "marker", "where", "seen", "distance [m]", "off normal [°]", "px/cell", "reproj. [px]"):
+        markers.add_column(col, justify="left" if col in ("camera", "where") else "right")
+    by_id = rig.marker_by_id
+    for c in report.cameras:
+        for s in c.sights:
+            m = by_id[s.marker]
+            markers.add_row(c.camera, str(s.marker), f"{m.body[0].upper()} {m.cone}/{m.face}", f"{s.share:.0%}",
+                            f"{s.distance_m:.1f}", f"{s.angle_deg:.0f}", f"{s.cell_px:.1f}", f"{s.reprojection_px:.2f}")
+    console.print(markers)
+    console.print("where: J jacket, T topside; px/cell: pixels per code cell along the marker's shortest side")
+    if report.unseen_markers:
+        console.print(f"markers of the rig no camera sees: {', '.join(map(str, report.unseen_markers))}")
+    for i, cameras in report.unknown_ids.items():
+        console.print(f"id {i} is not in the rig, seen by {', '.join(cameras)}")
+    if report.disagreements:
+        table = Table(title="markers that disagree with the rig")
+        for col in ("camera", "markers", "frames", "residual [m]", "σ [m]", "normal [°]", "turn [°]"):
+            table.add_column(col, justify="left" if col in ("camera", "markers") else "right")
+        for d in report.disagreements:
+            table.add_row(d.camera, ", ".join(map(str, d.markers)), str(d.frames), f"{d.offset_m:.2f}",
+                          f"{d.sigma_m:.2f}", f"{d.normal_deg:.0f}", f"{d.turn_deg:+.0f}")
+        console.print(table)
+        for d in report.disagreements:
+            console.print(f"disagrees: {d.camera}: {d.reason}")
+    cones = Table(title="cones (σ from the fusion filter after these seconds)")
+    for col in ("cone", "σx [mm]", "σy [mm]", "σz [mm]", "cameras", "verdict"):
+        cones.add_column(col, justify="right" if col.startswith("σ") else "left")
+    for c in report.cones:
+        sigma = [f"{v * 1000:.0f}" if np.isfinite(v) else "–" for v in c.sigma_m]
+        cones.add_row(c.cone, *sigma, ", ".join(c.cameras) or "none", c.verdict)
+    console.print(cones)
+    for c in report.cones:
+        console.print(f"cone {c.cone}: {c.verdict}: {c.reason}")
+    problems = report.problems()
+    if not problems:
+        console.print("READY: every cone is ready and every marker agrees with the rig")
+        return
+    verdicts = Counter(c.verdict for c in report.cones if c.verdict != "ready")
+    parts = [f"{n} cone{'' if n == 1 else 's'} {v}" for v, n in sorted(verdicts.items())]
+    if report.disagreeing_markers:
+        parts.append(f"markers {', '.join(map(str, report.disagreeing_markers))} disagree with the rig")
+    others = len(problems) - sum(verdicts.values()) - len(report.disagreements)
+    if others:
+        parts.append(f"{others} other finding{'' if others == 1 else 's'} above")
+    console.print(f"NOT READY: {'; '.join(parts)}")
+
+
+def _check_recording(report: CheckReport, path: Path) -> None:
+    """The installation as the check understood it, as a Rerun recording: the rig's markers and cones, the topside
+    where the filter has it, every camera placed by its own markers with its first frame and the markers it sees
+    (red: named by a disagreement), and the findings."""
+    import rerun as rr
+
+    from viewer.installation import log_installation
+    from viewer.recording import APP_ID, log_frustum, log_image, log_marker_frames, log_rig, set_capture_time
+
+    rec = rr.RecordingStream(APP_ID)
+    rec.save(str(path))
+    log_rig(rec, report.rig)
+    log_installation(rec, report.rig)
+    if report.T_jacket_topside is not None:
+        T = report.T_jacket_topside
+        rr.log("world/topside", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]), static=True, recording=rec)
+    wrong = set(report.disagreeing_markers)
+    for c in report.cameras:
+        if c.T_jacket_camera is None or c.model is None:
+            continue
+        base = f"world/cameras/{c.camera}"
+        T = c.T_jacket_camera
+        rr.log(base, rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]), static=True, recording=rec)
+        log_frustum(rec, base, c.model)
+        if c.T_jacket_markers:
+            log_marker_frames(rec, f"world/estimated/{c.camera}", report.rig.marker_size, c.T_jacket_markers,
+                              [(230, 40, 40) if i in wrong else (40, 200, 80) for i in c.T_jacket_markers])
+        if c.first_frame is not None and c.first_frame.gray is not None:
+            set_capture_time(rec, c.first_frame.time)
+            log_image(rec, f"{base}/image", c.first_frame)
+    lines = ["# topside check", "", *(f"- {line}" for line in report.problems() or ["READY"]), "", "| cone | verdict |",
+             "|---|---|", *(f"| {c.cone} | {c.verdict}: {c.reason} |" for c in report.cones)]
+    rr.log("check", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True, recording=rec)
+    rec.flush(timeout_sec=1e38)
+    rec.disconnect()
 
 
 DEMO_SCENARIO = "config2-procedure5-weather"

@@ -1,0 +1,294 @@
+"""`topside check` on a simulated clip: a sound rig passes; a swapped id, a centre 0.3 m off, a wrong face, a blind
+cone and a wrong camera survey are each flagged by name; clocks; the command's exit codes and its recording."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import fcntl
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from tracking.check import CameraRun, CheckReport, camera_clock, check_runs, run_cameras
+from tracking.images import VideoHealth
+from tracking.pipeline import CameraTracker
+from tracking.rig import load_rig
+
+SCENARIO = "config2-procedure5"  # A by a stern camera (34 m) and a drone, D by two drones; the topside still 5 s
+DURATION_S = 6.0
+SECONDS = 5.0
+TOPSIDE = [sys.executable, "-m", "tracking.cli"]
+
+
+@pytest.fixture(scope="session")
+def clip(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One simulated clip for every test here, rendered once even when xdist's workers share the session: under a
+    lock in the run's common temporary folder."""
+    from tracking.sim.command import run_simulate
+
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    folder = shared / f"check-{SCENARIO}"
+    with open(shared / f"check-{SCENARIO}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (folder / "scenario.yaml").is_file():
+            run_simulate(SCENARIO, folder, duration=DURATION_S, quiet=True)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def runs(clip: Path) -> dict[str, CameraRun]:
+    """Every camera's first SECONDS, detected once with the simulation's own rig."""
+    return run_cameras(load_rig(clip / "rig.yaml"), SECONDS)
+
+
+def rig_file(clip: Path, folder: Path, change=None, name: str = "rig.yaml") -> Path:
+    """The clip's rig, changed as a rigger might have entered it wrongly, written into folder (paths made absolute)."""
+    data = yaml.safe_load((clip / "rig.yaml").read_text())
+    for cam in data["cameras"]:
+        cam["source"], cam["calibration"] = str(clip / cam["source"]), str(clip / cam["calibration"])
+    if change is not None:
+        change(data)
+    (folder / name).write_text(yaml.safe_dump(data, sort_keys=False))
+    return folder / name
+
+
+def checked(clip: Path, runs: dict[str, CameraRun], folder: Path, change=None) -> CheckReport:
+    """The check of a changed rig on the clip's frames: their detections measured again with that rig (detection does
+    not depend on the rig's geometry; CameraTracker.measure is what process does after detecting)."""
+    rig = load_rig(rig_file(clip, folder, change))
+    again = {}
+    for name, run in runs.items():
+        entry = next(c for c in rig.cameras if c.name == name)
+        tracker = CameraTracker(rig, entry, run.tracker.camera, run.tracker.detector)
+        again[name] = dataclasses.replace(run, tracker=tracker,
+                                          results=[tracker.measure(r.frame, r.detections) for r in run.results])
+    return check_runs(rig, again, SECONDS)
+
+
+def markers(data: dict) -> dict[int, dict]:
+    return {m["id"]: m for m in data["markers"]}
+
+
+def only_a_and_d(data: dict) -> None:
+    """The clip's rig without cones B and C (no marker there: their σ rests on the topside's rotation)."""
+    data["cones"] = {k: v for k, v in data["cones"].items() if k in "AD"}
+
+
+def named(report: CheckReport) -> set[int]:
+    return set(report.disagreeing_markers)
+
+
+# --- a sound rig ------------------------------------------------------------------------------------------------------
+
+def test_a_sound_rig_is_ready(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:
+    report = checked(clip, runs, tmp_path, only_a_and_d)
+    assert report.ready, report.problems()
+    assert not report.disagreements
+    assert [(c.cone, c.verdict) for c in report.cones] == [("A", "ready"), ("D", "ready")]
+    assert {c.cone: c.cameras for c in report.cones} == {"A": ("drone_A", "stern_A"), "D": ("drone_D1", "drone_D2")}
+    for cone in report.cones:
+        assert 0.002 < cone.sigma_m.max() <= 0.025
+    seen = {c.camera: {s.marker for s in c.sights if s.counts} for c in report.cameras}
+    assert seen == {"stern_A": {0, 1}, "drone_A": {2, 3}, "drone_D1": {4, 5}, "drone_D2": {6, 7}}
+    stern = next(c for c in report.cameras if c.camera == "stern_A")
+    sight = next(s for s in stern.sights if s.marker == 0)
+    assert sight.distance_m == pytest.approx(34.0, abs=0.5)  # the stern camera at y = -45, the marker at -11.1
+    assert sight.angle_deg < 10 and 4 < sight.cell_px < 6 and sight.reprojection_px < 0.2
+    truth = pd.read_csv(clip / "truth.csv").iloc[0]
+    assert stern.T_jacket_camera is not None  # placed where the filter has it, within a few cm of the truth
+    assert np.linalg.norm(stern.T_jacket_camera[:3, 3] - truth[["camera_stern_A_x", "camera_stern_A_y",
+                                                                 "camera_stern_A_z"]].to_numpy(float)) < 0.1
+    for c in report.cameras:
+        assert not c.clock.problems and c.clock.declared_fps == 30.0 and c.clock.frames >= 145
+
+
+def test_cones_without_markers_are_weak_and_a_far_one_blind(clip: Path, runs: dict[str, CameraRun],
+                                                             tmp_path: Path) -> None:
+    """Cones B and C (no marker: the topside's rotation) show σ over 25 mm after 5 s; a cone 160 m off stays above the
+    report limit: blind, by name."""
+    def far_cone(data: dict) -> None:
+        data["cones"]["E"] = [-150.0, 0.0, 1.5]
+
+    report = checked(clip, runs, tmp_path, far_cone)
+    verdicts = {c.cone: c for c in report.cones}
+    assert {k: v.verdict for k, v in verdicts.items()} == {"A": "ready", "B": "weak", "C": "weak", "D": "ready",
+                                                           "E": "blind"}
+    assert verdicts["E"].sigma_m.max() > 0.05
+    assert verdicts["E"].reason.startswith("no marker at E: from the topside's rigid pose")
+    assert "above the 50 mm report limit: it would show NO DATA" in verdicts["E"].reason
+    assert "cone E: blind: no marker at E" in "\n".join(report.problems())
+    assert not report.disagreements and not report.ready
+
+
+# --- planted faults -----------------------------------------------------------------------------------------------
+
+def test_swapped_ids_are_named(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:
+    """Jacket markers 0 (A/ahead) and 2 (A/port) entered with each other's ids (pairs kept consistent)."""
+    def swap(data: dict) -> None:
+        only_a_and_d(data)
+        ms = markers(data)
+        ms[0]["id"], ms[2]["id"] = 2, 0
+        for p in data["pairs"]:
+            p["jacket"] = {0: 2, 2: 0}.get(p["jacket"], p["jacket"])
+
+    report = checked(clip, runs, tmp_path, swap)
+    assert {0, 2} <= named(report) and not report.ready
+    tilts = {d.camera: d for d in report.disagreements if d.normal_deg > 45 and not d.against}
+    assert set(tilts) == {"stern_A", "drone_A"}  # each sees one jacket and one topside marker: the topside tilts 90°
+    assert 0 in tilts["stern_A"].markers and 2 in tilts["drone_A"].markers
+
+
+def test_a_centre_off_by_0_3_m_is_named(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:
+    """Jacket marker 6 (D/astern) entered 0.3 m higher than it is (its pair's mated entered to match)."""
+    def raise_six(data: dict) -> None:
+        only_a_and_d(data)
+        markers(data)[6]["center"][2] += 0.3
+        next(p for p in data["pairs"] if p["jacket"] == 6)["mated"][2] -= 0.3
+
+    report = checked(clip, runs, tmp_path, raise_six)
+    assert 6 in named(report) and named(report) <= {4, 5, 6, 7}
+    (finding,) = report.disagreements
+    assert finding.offset_m == pytest.approx(0.3, abs=0.05) and finding.offset_m > 5 * finding.sigma_m
+    assert "disagree on cone D's offset by 0.29 m" in finding.reason or "by 0.3" in finding.reason
+
+
+def test_a_wrong_face_is_named(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:
+    """Topside marker 7 (D/astern) entered on the port face."""
+    def port_seven(data: dict) -> None:
+        only_a_and_d(data)
+        markers(data)[7]["face"] = "port"
+
+    report = checked(clip, runs, tmp_path, port_seven)
+    assert 7 in named(report) and named(report) <= {4, 5, 6, 7}
+    tilt = next(d for d in report.disagreements if d.camera == "drone_D2")
+    assert tilt.normal_deg == pytest.approx(90, abs=10)
+    assert "marker 7 (topside D/port)" in tilt.reason
+
+
+def test_a_turned_marker_the_rig_does_not_know_is_named(clip: Path, runs: dict[str, CameraRun],
+                                                         tmp_path: Path) -> None:
+    """The rig says topside marker 5 is mounted turned 90°; it is upright."""
+    def turn_five(data: dict) -> None:
+        only_a_and_d(data)
+        markers(data)[5]["rotation_deg"] = 90.0
+
+    report = checked(clip, runs, tmp_path, turn_five)
+    assert 5 in named(report) and not report.ready
+
+
+def test_a_camera_survey_against_its_markers(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:
+    """stern_A's surveyed position: right (within 0.3 m, used) or 3 m off (refused and reported)."""
+    truth = pd.read_csv(clip / "truth.csv").iloc[0][["camera_stern_A_x", "camera_stern_A_y",
+                                                     "camera_stern_A_z"]].to_numpy(float)
+
+    def surveyed(offset: list[float]):
+        def change(data: dict) -> None:
+            only_a_and_d(data)
+            data["cameras"][0].update(position=(truth + offset).tolist(), position_sigma=0.2)
+        return change
+
+    good = checked(clip, runs, tmp_path, surveyed([0.0, 0.0, 0.0]))
+    stern = next(c for c in good.cameras if c.camera == "stern_A")
+    assert not stern.survey_conflict and stern.survey_m is not None and stern.survey_m < 0.3 and good.ready
+    bad = checked(clip, runs, tmp_path, surveyed([0.0, 3.0, 0.0]))
+    stern = next(c for c in bad.cameras if c.camera == "stern_A")
+    assert stern.survey_conflict and stern.survey_m == pytest.approx(3.0, abs=0.5)
+    assert any(p.startswith("stern_A: its surveyed position is") for p in bad.problems()) and not bad.ready
+
+
+# --- clocks -----------------------------------------------------------------------------------------------------------
+
+def health(fps: float) -> VideoHealth:
+    return VideoHealth(source="cam.mp4", interval_s=1.0 / fps)
+
+
+def test_a_clock_at_its_rate_with_a_dropped_frame() -> None:
+    times = np.delete(np.arange(150) / 30.0, 40)
+    clock = camera_clock("cam", times, health(30.0))
+    assert clock.dropped == 1 and clock.irregular == 0 and clock.measured_fps == pytest.approx(30.0)
+    assert not clock.problems
+
+
+def test_clock_problems() -> None:
+    slow = camera_clock("cam", np.arange(120) / 25.0, health(30.0))  # declares 30, delivers 25: every step 1.2
+    assert slow.measured_fps == pytest.approx(25.0) and "runs at 25.000 fps, not the 30.000" in slow.problems[0]
+    drifting = camera_clock("cam", np.arange(150) / 30.3, health(30.0))  # 1 % fast
+    assert drifting.measured_fps == pytest.approx(30.3) and "runs at 30.300 fps, not the 30.000" in drifting.problems[0]
+    gappy = camera_clock("cam", np.arange(0, 300, 2) / 30.0, health(30.0))  # every other frame lost
+    assert gappy.dropped == 149 and "149 of 299 frames dropped" in gappy.problems[0]
+    jitter = np.arange(150) / 30.0 + np.random.default_rng(0).uniform(-0.012, 0.012, 150)
+    assert camera_clock("cam", jitter, health(30.0)).irregular > 10
+    assert camera_clock("cam", np.array([1.0]), health(30.0)).problems == ["1 frame: no interval to measure"]
+
+
+# --- the command ------------------------------------------------------------------------------------------------------
+
+def test_the_command_flags_a_wrong_face_and_records_the_installation(clip: Path, tmp_path: Path) -> None:
+    def port_seven(data: dict) -> None:
+        only_a_and_d(data)
+        markers(data)[7]["face"] = "port"
+
+    rig = rig_file(clip, tmp_path, port_seven)
+    rrd = tmp_path / "check.rrd"
+    proc = subprocess.run([*TOPSIDE, "check", "--rig", str(rig), "--seconds", str(SECONDS), "--rrd", str(rrd)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    out = proc.stdout
+    assert "disagrees: drone_D2: its jacket markers [6] and topside markers [7] put the topside" in out
+    assert "marker 7 (topside D/port)" in out and "NOT READY" in out and "markers 6, 7 disagree" in out
+    assert "cone A: ready: seen by drone_A, stern_A" in out
+    assert f"wrote {rrd}" in out
+
+    from viewer.readback import chunks_by_entity
+
+    entities = set(chunks_by_entity(rrd))
+    for name in ("stern_A", "drone_A", "drone_D1", "drone_D2"):
+        assert {f"/world/cameras/{name}", f"/world/cameras/{name}/image", f"/world/estimated/{name}"} <= entities
+    assert {"/world/jacket/markers/6", "/world/topside/markers/7/face", "/world/jacket/stabbing_cones", "/check",
+            "/world/topside"} <= entities
+
+
+def test_the_command_passes_a_sound_rig(clip: Path, tmp_path: Path) -> None:
+    rig = rig_file(clip, tmp_path, only_a_and_d)
+    proc = subprocess.run([*TOPSIDE, "check", "--rig", str(rig), "--seconds", str(SECONDS)], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "READY: every cone is ready and every marker agrees with the rig" in proc.stdout
+
+
+@pytest.mark.parametrize(("args", "fragment"), [
+    (["--seconds", "0"], "--seconds"),
+    (["--seconds", "nan"], "--seconds"),
+    (["--rrd", "RIG"], "is an input of this command"),
+])
+def test_the_command_refuses_bad_input(clip: Path, tmp_path: Path, args: list[str], fragment: str) -> None:
+    rig = rig_file(clip, tmp_path)
+    proc = subprocess.run([*TOPSIDE, "check", "--rig", str(rig), *[str(rig) if a == "RIG" else a for a in args]],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and fragment in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, \
+        proc.stderr
+
+
+def test_a_rig_with_a_bad_orientation_is_refused_in_one_line(clip: Path, tmp_path: Path) -> None:
+    def not_a_rotation(data: dict) -> None:
+        markers(data)[3]["R"] = [[1, 0, 0], [0, 1, 0], [0, 0, 2]]
+
+    rig = rig_file(clip, tmp_path, not_a_rotation)
+    proc = subprocess.run([*TOPSIDE, "check", "--rig", str(rig)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "markers[3].R: not orthonormal" in proc.stderr, proc.stderr
+
+
+def test_copy_is_deep() -> None:
+    """(Guards the helpers: a rig change never leaks into the next test's rig.)"""
+    data = {"markers": [{"id": 1, "center": [0.0, 0.0, 0.0]}]}
+    copied = copy.deepcopy(data)
+    markers(copied)[1]["center"][2] += 1
+    assert data["markers"][0]["center"][2] == 0.0
