@@ -601,6 +601,92 @@ def live(
 
 
 @app.command()
+def sync(
+    rig: Annotated[Path, typer.Option(help="Rig file whose cameras' clocks to measure.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Rig file to write, with the measured time_offsets.")],
+    reference: Annotated[str | None, typer.Option(help="Camera whose clock the others are set to (default: the one "
+                                                       "that times the topside's motion best).")] = None,
+    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = DEFAULT_REFINEMENT,
+) -> None:
+    """Measure every camera's clock offset against the others from the topside's motion they all see; write the rig
+    with the measured time_offsets and their σ.
+
+    A camera whose offset the footage cannot tell (a still topside, a far view) keeps the rig's offset and is named.
+    Exit status: 0 when every clock is measured; 1 when one is not (the rig is still written); 2 for bad input.
+    """
+    import time
+
+    from tracking.clocks import synced_rig, synchronise
+    from tracking.fieldwork import clock_lines, clock_table, footage_measurements, write_rig
+    from tracking.rig import load_rig
+
+    the_rig = load_rig(rig)
+    _warn_rig(the_rig)
+    check_outputs({"--out": out}, rig_inputs(the_rig))
+    if reference is not None and reference not in {c.name for c in the_rig.cameras}:
+        raise InputError(reference, f"is not a camera of {rig} (expected one of "
+                                    f"{', '.join(c.name for c in the_rig.cameras)})", "--reference")
+    t0 = time.perf_counter()
+    with _progress() as progress:
+        progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None)
+        offsets, _, seconds = footage_measurements(the_rig, refine, observations=False)
+        t1 = time.perf_counter()
+        clocks = synchronise(the_rig, offsets, reference)
+    console.print(clock_table(clocks))
+    for line in clock_lines(clocks):
+        console.print(line, markup=False)
+    write_rig(synced_rig(the_rig, clocks), out)
+    console.print(f"wrote {out} · {seconds / 60:.1f} camera-minutes: measured in {t1 - t0:.0f} s, fitted in "
+                  f"{time.perf_counter() - t1:.1f} s", markup=False)
+    if not all(c.known for c in clocks):
+        raise typer.Exit(1)
+
+
+@app.command()
+def survey(
+    rig: Annotated[Path, typer.Option(help="Rig file whose markers to survey (its clocks measured: topside sync).")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Rig file to write, with the markers' corrected poses.")],
+    start: Annotated[float | None, typer.Option("--from", help="From this capture time, s (the bodies still or "
+                                                               "moving rigidly: before the lift).")] = None,
+    end: Annotated[float | None, typer.Option("--to", help="To this capture time, s.")] = None,
+    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = DEFAULT_REFINEMENT,
+) -> None:
+    """Refine every marker's pose on its body from the footage (a bundle adjustment of all cameras' frames and the
+    markers' corners, each marker's survey σ as its prior, a marker named reference held); write the rig with each
+    correction and its σ, and flag markers moved beyond the rig's survey_tolerance.
+
+    Exit status: 0 when no marker is flagged; 1 when one is (the rig is still written); 2 for bad input.
+    """
+    import time
+
+    from tracking.fieldwork import footage_measurements, survey_lines, survey_table, write_rig
+    from tracking.rig import load_rig
+    from tracking.survey import survey_markers, surveyed_rig
+
+    the_rig = load_rig(rig)
+    _warn_rig(the_rig)
+    check_outputs({"--out": out}, rig_inputs(the_rig))
+    if start is not None and end is not None and end <= start:
+        raise InputError("--to", f"{end:g} s is not after --from {start:g} s (expected a stretch of footage)")
+    t0 = time.perf_counter()
+    with _progress() as progress:
+        progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None)
+        offsets, observations, seconds = footage_measurements(the_rig, refine, start, end)
+        t1 = time.perf_counter()
+        fit = survey_markers(the_rig, [*offsets, *observations])
+    console.print(survey_table(the_rig, fit))
+    console.print("where: J jacket, T topside; survey's σ kept: the footage cut its σ by less than a quarter (it "
+                  "cannot tell where that marker sits)", markup=False)
+    for line in survey_lines(the_rig, fit):
+        console.print(line, markup=False)
+    write_rig(surveyed_rig(the_rig, fit), out)
+    console.print(f"wrote {out} · {seconds / 60:.1f} camera-minutes: measured in {t1 - t0:.0f} s, fitted in "
+                  f"{time.perf_counter() - t1:.1f} s ({fit.iterations} iterations)", markup=False)
+    if any(s.flagged for s in fit.markers):
+        raise typer.Exit(1)
+
+
+@app.command()
 def simulate(
     scenario: Annotated[str, typer.Argument(help="Scenario YAML file or built-in name (e.g. config2-procedure5).")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Output folder for videos, rig, calibration, truth.")],

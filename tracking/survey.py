@@ -1,0 +1,418 @@
+"""Marker poses from the footage: a bundle adjustment of every marker's pose in its body's frame.
+
+Markers are mounted by riggers and surveyed to a centimetre or two and a degree or so; a jacket marker's centre off by
+20 mm puts every offset measured through it 20 mm off. The footage itself measures the markers' poses where cameras see
+them together with other markers of the same body, or see the topside move: all cameras' frames of a stretch of
+footage are fitted at once to
+
+- every marker's pose in its body's frame: a correction (rotation δθ about the body's axes at the marker's centre,
+  displacement δp) to the rig's pose, with the rig's survey σ as its prior;
+- the topside's rigid motion relative to the jacket: translation and small rotation as cubic B-splines of capture time
+  (the clocks must be synchronised first: `topside sync`);
+- every camera frame's pose T_camera_jacket (vessels and drones move; each frame is free);
+
+by the markers' corners (undistorted pixels, σ CORNER_NOISE_PX, soft-L1 weights against rain-struck corners), with
+Levenberg-Marquardt steps on the sparse normal equations.
+
+Gauge: the jacket frame is defined by its markers as surveyed, the topside frame by its own: either one marker per body
+named `reference: true` in the rig (held where the rig has it), or, without one, by every marker's survey prior at once
+(a correction common to all markers of a body is then as uncertain as the survey: no footage can tell it). What the
+footage cannot tell stays where the survey put it, with the survey's σ: a camera that sees one jacket and one topside
+marker and nothing else cannot tell both moved together (its offsets are the same either way), and a topside moving
+along one line cannot tell a rotation about that line. The σ written for each marker says what was learnt.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix, csc_matrix, diags
+from scipy.sparse.linalg import splu
+
+from tracking.clocks import ACCEL_MPS2, ANGULAR_ACCEL_RADPS2, KNOT_S, ROTATION_KNOT_S, Spline, _Model, _samples
+from tracking.errors import InputError
+from tracking.offsets import BodyObservation, PairOffset
+from tracking.pose import Choice, marker_object_points
+from tracking.rig import Marker, Pair, Rig, SurveyCorrection, SurveySigma
+
+CORNER_NOISE_PX = 0.15  # σ of a corner coordinate, as the fusion filter takes it (tracking.fusion)
+SOFT_L1_PX = 0.5  # corners further than this from their prediction count linearly (rain, glare)
+MAX_ITERATIONS = 40  # Levenberg-Marquardt steps
+TOLERANCE = 1e-7  # relative decrease of the cost at which it stops
+DIFF_STEP = 1e-6  # rad or m: forward differences of one observation's corners
+RIDGE = 1e-9  # relative damping kept in the normal equations: a gauge no prior fixes stays finite
+DEFAULT_TOLERANCE_SIGMAS = 3.0  # without the rig's survey_tolerance, a correction beyond this many prior σ is flagged
+MIN_VIEWS = 10  # a marker seen in fewer frames keeps its survey pose
+
+
+@dataclass(frozen=True)
+class MarkerSurvey:
+    """One marker's pose as the footage places it: its correction to the rig's pose and what is left of its σ."""
+
+    id: int
+    body: str
+    position_m: np.ndarray  # (3,) centre moved by, body frame, m
+    rotation_rad: np.ndarray  # (3,) rotation vector applied at the centre, body frame, rad
+    sigma_m: np.ndarray  # (3,) σ of the corrected centre, body frame, m
+    sigma_rad: np.ndarray  # (3,) σ of the corrected rotation about the body's axes, rad
+    prior_m: np.ndarray  # (3,) σ the survey gave the centre, m
+    prior_rad: np.ndarray  # (3,) σ the survey gave the rotation, rad
+    views: int  # camera frames that saw it
+    reference: bool = False  # held as its body's datum
+    flagged: bool = False  # moved beyond the survey's tolerance
+
+    @property
+    def learnt(self) -> float:
+        """Share of the survey's position σ the footage removed, along the best-seen axis (0: nothing learnt)."""
+        if self.reference or not np.any(self.prior_m > 0):
+            return 0.0
+        return float(np.max(1.0 - self.sigma_m / np.maximum(self.prior_m, 1e-12)))
+
+
+@dataclass(frozen=True)
+class SurveyFit:
+    """The survey of one stretch of footage: every marker, and how well the corners fitted."""
+
+    markers: list[MarkerSurvey]
+    frames: int  # camera frames used
+    corners: int  # corners fitted
+    rms_px: float  # RMS corner residual, px
+    iterations: int
+
+
+def rodrigues(v: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotation matrices of rotation vectors (N, 3) (series below 1e-8 rad)."""
+    theta = np.linalg.norm(v, axis=1)
+    small = theta < 1e-8
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta**2 / 6, np.sin(t) / t)
+    b = np.where(small, 0.5 - theta**2 / 24, (1 - np.cos(t)) / t**2)
+    K = np.zeros((len(v), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return np.eye(3)[None] + a[:, None, None] * K + b[:, None, None] * (K @ K)
+
+
+def rotvec(R: np.ndarray) -> np.ndarray:
+    """(3,) rotation vector of a rotation matrix (3, 3) (small to moderate angles)."""
+    c = np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)
+    v = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    s = float(np.linalg.norm(v))
+    return v if s < 1e-12 else v * (np.arctan2(s, c) / s)
+
+
+@dataclass
+class _Views:
+    """Every (frame, marker) the survey fits, as arrays of V views over F frames."""
+
+    frame: np.ndarray  # (V,) frame index
+    marker: np.ndarray  # (V,) index into the rig's markers
+    corners: np.ndarray  # (V, 8) undistorted pixels
+    K: np.ndarray  # (V, 4) fx, fy, cx, cy
+    time: np.ndarray  # (V,) capture time
+    topside: np.ndarray  # (V,) bool
+    T_camera_jacket: np.ndarray  # (F, 4, 4) each frame's first pose
+    frame_camera: list[str]
+
+
+def _first_pose(o: BodyObservation, near: np.ndarray | None) -> np.ndarray | None:
+    """A frame's T_camera_jacket to start from: its jacket pose, the IPPE option whose camera sits nearest `near`
+    (the camera's typical position, jacket frame) when ambiguous."""
+    if o.jacket is None:
+        return None
+    options = [o.jacket.T_camera_body, *(T for T, _ in o.jacket.alternatives)]
+    if near is None or o.jacket.choice == Choice.UNIQUE:
+        return options[0]
+    return min(options, key=lambda T: float(np.linalg.norm(-T[:3, :3].T @ T[:3, 3] - near)))
+
+
+def _views(rig: Rig, observations: list[BodyObservation]) -> _Views:
+    """The views of the observations with a jacket pose to start from."""
+    index = {m.id: k for k, m in enumerate(rig.markers)}
+    centres: dict[str, list[np.ndarray]] = {}
+    for o in observations:
+        if o.jacket is not None and o.jacket.choice == Choice.UNIQUE:
+            T = o.jacket.T_camera_body
+            centres.setdefault(o.camera, []).append(-T[:3, :3].T @ T[:3, 3])
+    typical = {c: np.median(np.array(p), axis=0) for c, p in centres.items()}
+    frame, marker, corners, K, time, topside, poses, cams = [], [], [], [], [], [], [], []
+    for o in observations:
+        T = _first_pose(o, typical.get(o.camera))
+        if T is None:
+            continue
+        f = len(poses)
+        poses.append(T)
+        cams.append(o.camera)
+        for mid, z in sorted(o.corners.items()):
+            if mid not in index:
+                continue
+            frame.append(f)
+            marker.append(index[mid])
+            corners.append(np.asarray(z, dtype=float).reshape(8))
+            K.append([o.K[0, 0], o.K[1, 1], o.K[0, 2], o.K[1, 2]])
+            time.append(o.time)
+            topside.append(rig.markers[index[mid]].body == "topside")
+    if not frame:
+        raise InputError(rig.path, "no camera frame shows a jacket marker in the footage (expected frames that place a "
+                                   "camera by its jacket markers)")
+    return _Views(np.array(frame), np.array(marker), np.array(corners), np.array(K, dtype=float), np.array(time),
+                  np.array(topside), np.array(poses), cams)
+
+
+class _Bundle:
+    """Parameters [frames' T_camera_jacket as corrections (δθ, δt) to their first poses [R0, t0]: [R(δθ) R0, t0 + δt]
+    (6 F), topside translation knots (3 n), rotation knots (3 m), free markers' corrections (6 M: δθ, δp)] and the
+    corners' residuals."""
+
+    def __init__(self, rig: Rig, v: _Views, free: list[int], priors: np.ndarray, p0: np.ndarray, w0: np.ndarray,
+                 trans: Spline, rot: Spline) -> None:
+        self.v = v
+        self.free = free
+        self.slot = {m: k for k, m in enumerate(free)}
+        self.priors = priors  # (M, 6) σ of δθ (rad) and δp (m)
+        self.trans, self.rot = trans, rot
+        nf = len(v.T_camera_jacket)
+        self.o_t = 6 * nf
+        self.o_w = self.o_t + 3 * trans.n
+        self.o_m = self.o_w + 3 * rot.n
+        self.size = self.o_m + 6 * len(free)
+        x = np.zeros(self.size)  # frames: rotation δθ and translation δt about their first pose [R0, t0]
+        x[self.o_t:self.o_w] = p0.reshape(-1)
+        x[self.o_w:self.o_m] = w0.reshape(-1)
+        self.x0 = x
+        self.R_nom = np.array([m.R_body_marker for m in rig.markers])
+        self.c_nom = np.array([m.center for m in rig.markers], dtype=float)
+        self.obj = marker_object_points(rig.marker_size)  # (4, 3)
+        self.mslot = np.array([self.slot.get(int(m), -1) for m in v.marker])  # (V,) -1: held
+        self.ti, self.tw, _ = trans.basis(v.time)
+        self.ri, self.rw, _ = rot.basis(v.time)
+
+    def local(self, x: np.ndarray) -> np.ndarray:
+        """(V, 18) each view's camera pose (6), topside pose (rotation, translation: 6) and marker correction (6)."""
+        V = len(self.v.frame)
+        out = np.zeros((V, 18))
+        cam = x[:self.o_t].reshape(-1, 6)
+        out[:, :6] = cam[self.v.frame]
+        P = x[self.o_t:self.o_w].reshape(-1, 3)
+        W = x[self.o_w:self.o_m].reshape(-1, 3)
+        top = self.v.topside
+        out[top, 6:9] = np.einsum("nk,nkj->nj", self.rw[top], W[self.ri[top]])
+        out[top, 9:12] = np.einsum("nk,nkj->nj", self.tw[top], P[self.ti[top]])
+        M = x[self.o_m:].reshape(-1, 6)
+        free = self.mslot >= 0
+        out[free, 12:18] = M[self.mslot[free]]
+        return out
+
+    def project(self, q: np.ndarray) -> np.ndarray:
+        """(V, 8) predicted corners from local parameters q (V, 18)."""
+        m = self.v.marker
+        X = np.einsum("nij,kj->nki", rodrigues(q[:, 12:15]) @ self.R_nom[m], self.obj)
+        X = X + (self.c_nom[m] + q[:, 15:18])[:, None, :]
+        X = np.einsum("nij,nkj->nki", rodrigues(q[:, 6:9]), X) + q[:, None, 9:12]  # zero pose for jacket markers
+        T0 = self.v.T_camera_jacket[self.v.frame]
+        X = np.einsum("nij,nkj->nki", rodrigues(q[:, :3]) @ T0[:, :3, :3], X) + (T0[:, :3, 3] + q[:, 3:6])[:, None]
+        K = self.v.K
+        u = K[:, None, 0] * X[:, :, 0] / X[:, :, 2] + K[:, None, 2]
+        w = K[:, None, 1] * X[:, :, 1] / X[:, :, 2] + K[:, None, 3]
+        return np.stack([u, w], axis=2).reshape(-1, 8)
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """(V, 8) measured minus predicted corners, px."""
+        return self.v.corners - self.project(self.local(x))
+
+    def prior_residuals(self, x: np.ndarray) -> np.ndarray:
+        """Whitened priors: marker corrections, the topside's accelerations."""
+        M = x[self.o_m:].reshape(-1, 6) / self.priors
+        P = x[self.o_t:self.o_w].reshape(-1, 3)
+        W = x[self.o_w:self.o_m].reshape(-1, 3)
+        accel = (P[2:] - 2 * P[1:-1] + P[:-2]).reshape(-1) / (self.trans.h**2 * ACCEL_MPS2)
+        angular = (W[2:] - 2 * W[1:-1] + W[:-2]).reshape(-1) / (self.rot.h**2 * ANGULAR_ACCEL_RADPS2)
+        return np.concatenate([M.reshape(-1), accel, angular])
+
+    def jacobian(self, x: np.ndarray) -> csc_matrix:
+        """Sparse Jacobian of [corner residuals / CORNER_NOISE_PX, prior residuals] (signs: of the predictions)."""
+        q = self.local(x)
+        base = self.project(q)
+        D = np.empty((len(q), 8, 18))
+        for j in range(18):
+            q1 = q.copy()
+            q1[:, j] += DIFF_STEP
+            D[:, :, j] = (self.project(q1) - base) / DIFF_STEP
+        D /= CORNER_NOISE_PX
+        V = len(q)
+        rows8 = (8 * np.arange(V))[:, None] + np.arange(8)  # (V, 8)
+        rows, cols, vals = [], [], []
+
+        def add(mask: np.ndarray, col: np.ndarray, d: np.ndarray) -> None:
+            """d (v, 8, c): derivatives of the views in mask by columns col (v, c)."""
+            rows.append(np.repeat(rows8[mask][:, :, None], d.shape[2], axis=2).reshape(-1))
+            cols.append(np.repeat(col[:, None, :], 8, axis=1).reshape(-1))
+            vals.append(d.reshape(-1))
+
+        every = np.ones(V, bool)
+        add(every, 6 * self.v.frame[:, None] + np.arange(6), D[:, :, :6])
+        top = self.v.topside
+        for k in range(4):
+            add(top, self.o_w + 3 * self.ri[top, k][:, None] + np.arange(3),
+                D[top][:, :, 6:9] * self.rw[top, k][:, None, None])
+            add(top, self.o_t + 3 * self.ti[top, k][:, None] + np.arange(3),
+                D[top][:, :, 9:12] * self.tw[top, k][:, None, None])
+        free = self.mslot >= 0
+        add(free, self.o_m + 6 * self.mslot[free][:, None] + np.arange(6), D[free][:, :, 12:18])
+        m0 = 8 * V
+        nm = 6 * len(self.free)
+        rows.append(m0 + np.arange(nm))
+        cols.append(self.o_m + np.arange(nm))
+        vals.append(1.0 / self.priors.reshape(-1))
+        m1 = m0 + nm
+        for spline, offset, scale in ((self.trans, self.o_t, self.trans.h**2 * ACCEL_MPS2),
+                                      (self.rot, self.o_w, self.rot.h**2 * ANGULAR_ACCEL_RADPS2)):
+            k = np.arange(3 * (spline.n - 2))
+            j, a = k // 3, k % 3
+            for shift, value in ((0, 1.0), (1, -2.0), (2, 1.0)):
+                rows.append(m1 + k)
+                cols.append(offset + 3 * (j + shift) + a)
+                vals.append(np.full(k.size, value / scale))
+            m1 += k.size
+        return coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(m1, self.size)).tocsc()
+
+    def weighted(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """All residuals whitened (corners / CORNER_NOISE_PX, priors), their soft-L1 weights, and the robust cost."""
+        r = self.residuals(x) / CORNER_NOISE_PX
+        d = np.linalg.norm(r.reshape(-1, 4, 2), axis=2) * CORNER_NOISE_PX / SOFT_L1_PX  # per corner, in SOFT_L1_PX
+        w_corner = 1.0 / np.sqrt(1.0 + d**2)
+        cost = float(np.sum(2 * (np.sqrt(1 + d**2) - 1)) * (SOFT_L1_PX / CORNER_NOISE_PX) ** 2)
+        prior = self.prior_residuals(x)
+        cost += float(prior @ prior)
+        # the model predicts; the residual is measured minus predicted: the Jacobian of the residual is -J
+        return np.concatenate([-r.reshape(-1), prior]), np.concatenate([np.repeat(w_corner, 2, axis=1).reshape(-1),
+                                                                       np.ones(prior.size)]), cost
+
+    def solve(self) -> tuple[np.ndarray, int]:
+        """Levenberg-Marquardt from the first poses: the parameters and the iterations taken."""
+        x = self.x0.copy()
+        r, w, cost = self.weighted(x)
+        lam = 1e-3
+        it = 0
+        for it in range(1, MAX_ITERATIONS + 1):
+            J = self.jacobian(x)
+            Jw = diags(np.sqrt(w)) @ J
+            A = (Jw.T @ Jw).tocsc()
+            g = Jw.T @ (np.sqrt(w) * r)
+            d = np.maximum(A.diagonal(), 1e-12)
+            while True:
+                step = splu((A + diags((lam + RIDGE) * d)).tocsc()).solve(-g)
+                x_new = x + step
+                r_new, w_new, cost_new = self.weighted(x_new)
+                if cost_new <= cost:
+                    break
+                lam *= 10
+                if lam > 1e8:
+                    return x, it
+            done = cost - cost_new <= TOLERANCE * cost
+            x, r, w, cost = x_new, r_new, w_new, cost_new
+            lam = max(lam / 10, 1e-9)
+            if done:
+                break
+        return x, it
+
+    def marker_covariance(self, x: np.ndarray) -> np.ndarray:
+        """(M, 6, 6) covariance of each free marker's correction (weights as at x)."""
+        _, w, _ = self.weighted(x)
+        J = diags(np.sqrt(w)) @ self.jacobian(x)
+        A = (J.T @ J).tocsc()
+        lu = splu((A + diags(RIDGE * np.maximum(A.diagonal(), 1e-12))).tocsc())
+        out = np.zeros((len(self.free), 6, 6))
+        for k in range(len(self.free)):
+            E = np.zeros((self.size, 6))
+            E[self.o_m + 6 * k + np.arange(6), np.arange(6)] = 1.0
+            out[k] = lu.solve(E)[self.o_m + 6 * k:self.o_m + 6 * k + 6]
+        return out
+
+
+def _initial_motion(rig: Rig, offsets: list[PairOffset], start: float, end: float
+                    ) -> tuple[Spline, Spline, np.ndarray, np.ndarray]:
+    """The topside's translation and rotation splines with their knots (n, 3), (m, 3) to start from: the clocks' joint
+    fit of the pair offsets at zero lag (tracking.clocks), or still at the origin without pair offsets."""
+    s = _samples(rig, offsets, [c.name for c in rig.cameras])
+    if not len(s.time):
+        trans, rot = Spline.spanning(start, end, KNOT_S), Spline.spanning(start, end, ROTATION_KNOT_S)
+        return trans, rot, np.zeros((trans.n, 3)), np.zeros((rot.n, 3))
+    model = _Model(s, [], 0)
+    x = model.linear_fit(np.zeros(model.size))
+    return model.p, model.w, x[model.o_p:model.o_w].reshape(-1, 3), x[model.o_w:model.o_b].reshape(-1, 3)
+
+
+def survey_markers(rig: Rig, measurements: Iterable[PairOffset | BodyObservation]) -> SurveyFit:
+    """Every marker's pose refined from the footage's measurements (body observations with their corners, pair
+    offsets for the first estimate of the topside's motion); times on the rig's clocks (sync them first)."""
+    observations, offsets = [], []
+    for m in measurements:
+        (observations if isinstance(m, BodyObservation) else offsets).append(m)
+    v = _views(rig, observations)
+    counts = np.bincount(v.marker, minlength=len(rig.markers))
+    free, priors = [], []
+    for k, m in enumerate(rig.markers):
+        sigma = rig.marker_sigma(m)
+        if m.reference or counts[k] < MIN_VIEWS or sigma is None:
+            continue
+        prior = np.concatenate([sigma.tilt_rad(), sigma.position()])
+        if np.any(prior <= 0):
+            continue
+        free.append(k)
+        priors.append(prior)
+    if not free:
+        raise InputError(rig.path, "no marker to survey (expected survey_sigma, or a sigma on each marker, and "
+                                   f"markers seen in at least {MIN_VIEWS} frames)", "survey_sigma")
+    trans, rot, p0, w0 = _initial_motion(rig, offsets, float(v.time.min()), float(v.time.max()))
+    bundle = _Bundle(rig, v, free, np.array(priors), p0, w0, trans, rot)
+    x, iterations = bundle.solve()
+    cov = bundle.marker_covariance(x)
+    res = bundle.residuals(x)
+    out = []
+    tolerance = rig.survey_tolerance
+    for k, m in enumerate(rig.markers):
+        sigma = rig.marker_sigma(m)
+        prior_m = sigma.position() if sigma else np.zeros(3)
+        prior_rad = sigma.tilt_rad() if sigma else np.zeros(3)
+        if k in bundle.slot:
+            i = bundle.slot[k]
+            d = x[bundle.o_m + 6 * i:bundle.o_m + 6 * i + 6]
+            sd = np.sqrt(np.maximum(np.diag(cov[i]), 0.0))
+            limit_m = tolerance.position() if tolerance else DEFAULT_TOLERANCE_SIGMAS * prior_m
+            limit_rad = tolerance.tilt_rad() if tolerance else DEFAULT_TOLERANCE_SIGMAS * prior_rad
+            flagged = bool(np.any(np.abs(d[3:]) > limit_m) or np.any(np.abs(d[:3]) > limit_rad))
+            out.append(MarkerSurvey(m.id, m.body, d[3:].copy(), d[:3].copy(), sd[3:], sd[:3], prior_m, prior_rad,
+                                    int(counts[k]), False, flagged))
+        else:
+            out.append(MarkerSurvey(m.id, m.body, np.zeros(3), np.zeros(3), prior_m, prior_rad, prior_m, prior_rad,
+                                    int(counts[k]), m.reference))
+    return SurveyFit(out, len(v.T_camera_jacket), 4 * len(v.frame), float(np.sqrt(np.mean(res**2))), iterations)
+
+
+def surveyed_rig(rig: Rig, fit: SurveyFit) -> Rig:
+    """The rig with every surveyed marker moved to where the footage puts it, its correction and its σ; pairs' mated
+    offsets follow the corrected centres."""
+    by_id = {s.id: s for s in fit.markers}
+    markers: list[Marker] = []
+    for m in rig.markers:
+        s = by_id.get(m.id)
+        if s is None or s.reference or (not np.any(s.position_m) and not np.any(s.rotation_rad)):
+            markers.append(m)
+            continue
+        R = rodrigues(s.rotation_rad[None])[0] @ m.R_body_marker
+        markers.append(Marker(
+            id=m.id, body=m.body, cone=m.cone, face=m.face, reference=m.reference,
+            center=(np.array(m.center) + s.position_m).round(6).tolist(), R=R.round(9).tolist(),
+            sigma=SurveySigma(position_m=s.sigma_m.round(6).tolist(),
+                              tilt_deg=np.degrees(s.sigma_rad).round(6).tolist()),
+            correction=SurveyCorrection(position_m=s.position_m.round(6).tolist(),
+                                        rotation_deg=np.degrees(s.rotation_rad).round(6).tolist())))
+    centres = {m.id: np.array(m.center) for m in markers}
+    pairs = [Pair(cone=p.cone, face=p.face, jacket=p.jacket, topside=p.topside,
+                  mated=None if p.mated is None else (centres[p.topside] - centres[p.jacket]).round(6).tolist())
+             for p in rig.pairs]
+    return rig.model_copy(update={"markers": markers, "pairs": pairs})
