@@ -53,44 +53,27 @@ GATE_CHI2 = {3: 16.27, 6: 22.46}  # by degrees of freedom, 99.9 %
 REINIT_AFTER_REJECTS = 15  # consecutive gated measurements before the filter reopens a covariance
 CONTRIBUTION_WINDOW_S = 0.5  # a camera counts as contributing when it was accepted this recently
 AMBIGUOUS_VARIANCE_GAIN = 25.0  # σ × 5 for poses IPPE could not settle: their error is bimodal, not Gaussian
-MEASUREMENT_FLOOR_M = 0.01  # σ added to every measured position: biases the corner noise does not explain
-# (tilt of far markers, first-order rotation, timing); 2σ then holds 0.92-0.94 of errors on clear video
+MEASUREMENT_FLOOR_M = 0.01  # σ added to every measured position: biases corner noise does not explain (far markers'
+# tilt, first-order rotation, timing); evidence in docs/method.md#the-filters-constants, as for the constants below
 ROTATION_FLOOR_RAD = 1e-3  # σ added to every measured body rotation, for the same reasons
-REPORT_MAX_SIGMA_M = 0.05  # a cone whose offset σ exceeds this on any axis is reported as unknown (NaN):
-# 3σ must fit in the 150 mm concentricity tolerance for a number to be worth showing
+REPORT_MAX_SIGMA_M = 0.05  # a cone whose offset σ exceeds this on any axis is reported as unknown (NaN): 3σ must fit
+# in the 150 mm concentricity tolerance for a number to be worth showing
 REPORT_WARMUP_S = 4.0  # for this long after the topside is placed, a cone is reported only when its σ is below
-REPORT_WARMUP_SIGMA_M = 0.025  # this: the first frames leave the cameras' swing about their markers poorly known
-# and not Gaussian, and errors of 3-4σ of a 25-50 mm σ were reported in the first second; the corners' errors
-# are correlated over seconds (a far marker's depth and tilt cues), so a σ of 30 mm at 3 s still hid 54 mm
-# (accuracy benchmark; fusion_diagnosis.md: in procedure 5 the same errors shuffled in time give half of it)
+REPORT_WARMUP_SIGMA_M = 0.025  # this: the first seconds' camera poses are poorly known and not Gaussian
 SMOOTHER_SPAN_S = 30.0  # recorded runs are smoothed this much at a time, each time with SMOOTHER_LAG_S of the
-SMOOTHER_LAG_S = 45.0  # future after it: memory holds the steps of both, not of the whole run (1.9 GB per 95 s of
-# five cameras). A still camera's pose gains from the far future: procedure 1 (95 s) smoothed with 15 / 30 / 45 s of
-# it has a y MAE of 10.2 / 6.5 / 5.8 mm, the whole run 5.9 mm (accuracy benchmark, CRF 22)
+SMOOTHER_LAG_S = 45.0  # future after it: memory holds both, not the whole run; a still camera gains from the far future
 JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
-CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame: edge-fit corners in fog and rain have a median
-# error of 0.1 px
+CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame (edge-fit corners in fog and rain: 0.1 px median)
 VIEW = 8  # bias states per view (camera, marker): one per corner coordinate
-VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that stays while its marker's image stays: still markers in
-# still cameras keep whole-run mean errors of 0.03-0.11 px per corner (accuracy benchmark, CRF 22), and a synthetic
-# marker 39 px wide under 1.2 px blur keeps ±0.06 px from its own data cells alone
-VIEW_BIAS_RENEW_PX = 0.5  # that part renews as the marker's image moves: exp(-travel / this) of it stays from one frame
-# of the view to the next, travel the mean shift of its predicted corners. The filter's own corrections of a still
-# camera's pose count as travel too (0.01-0.05 px a frame): a still view keeps its bias for seconds, not for ever,
-# which did better than for ever (procedure 1, before the placement check: 48 against 102 mm) while the topside
-# markers' corners share a bias the model leaves out (see the README)
-VIEW_BIAS_TAU_S = 0.5  # ... but no faster than with this time constant, however far the image travels. A drone's
-# views travel 1.1-1.5 px a frame, and renewed by travel alone their biases counted as white noise: the keystone of a
-# drone's one marker then set its swing about it, and with it x at cone A, 56 mm off at 3σ in procedure 5's first
-# seconds (a marker's own cells and the stream's motion-compensated coding move with the marker, not with the pixel
-# grid). Chosen on the accuracy benchmark, procedure 5's largest error at 0.25 / 0.5 / 1 s: 47 / 40 / 40 mm (CRF 22).
-# It says more than the corners' statistics do (a drone view's per-coordinate autocorrelation: 0.2 at one frame,
-# at most 0.06 from three on), so
-# σ is conservative in configuration 2: beyond 2σ lie 0.2-0.5 % of the errors there (a Gaussian: 4.6 %)
-CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual
-# (1-4 % of corners are > 1 px off in rain: a heavy tail a Gaussian would follow)
-CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a hovering drone's jitter and a
-# vessel's wave motion turn within a second or two, so a camera never drifts on at the speed it had
+VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that stays while its marker's image stays
+VIEW_BIAS_RENEW_PX = 0.5  # that part renews as the marker's image moves: exp(-travel / this) of it stays from one
+# frame of the view to the next (travel: the mean shift of its predicted corners, the filter's own corrections included)
+VIEW_BIAS_TAU_S = 0.5  # ... but no faster than with this time constant, however far the image travels (a drone's
+# marker cells and the stream's coding move with the marker, not the pixel grid)
+CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual (rain's
+# heavy tail)
+CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a drone's jitter and a vessel's
+# wave motion turn within a second or two
 MOTION_LAG_S = 1.0  # lag of the second differences of jacket-marker image positions that measure a camera's motion
 MOTION_SAMPLES = 60  # second differences (per marker and image axis) whose median gives the camera's motion level
 MOTION_MIN_SAMPLES = 12  # until then the mount's motion prior is used as it stands
@@ -98,20 +81,15 @@ MOTION_UPDATE_EVERY = 5  # frames with new samples between two medians (the leve
 MOTION_FLOOR = 1e-4  # the least share of its mount's process noise a camera keeps
 GAUSSIAN_MEDIAN_CHI2_1 = 0.4549  # median of a χ² variable with 1 degree of freedom: variance from a median of squares
 PLACEMENT_GAIN = 25.0  # σ × 5 on the pose that first places a camera: it only linearises; the same frame's corners,
-# applied right after, carry its information (else counted twice, and a lone marker's tilt, poorly fitted, sticks)
+# applied right after, carry its information (else counted twice)
 CORNER_GATE_CHI2 = 26.12  # 8 degrees of freedom (a marker's four corners), 99.9 %
-PLACEMENT_MISFIT_RATIO = 3.0  # an ambiguous lone jacket marker is settled by the topside's corners only when one
-# IPPE option fits them this many times better (squared pixels) than the other; a near tie waits for another view. With
-# the pair stacked in one plane, a yaw flip barely moves the topside's marker: one such tie (8.7 against 9.4 px²) had
-# placed a stern camera 20° and 16 m off, and nothing afterwards corrected it within a minute
+PLACEMENT_MISFIT_RATIO = 3.0  # an ambiguous lone jacket marker is settled by the topside's corners only when one IPPE
+# option fits them this many times better (squared pixels) than the other; a near tie waits for another view
 TOPSIDE_PLACEMENT_M = 1.0  # σ of the topside's position when a single view first places it
 PLACEMENT_FIT_P = 0.99  # a view places a camera or the topside only if its pose fits its corners as well as
-# CORNER_NOISE_PX would at this probability (χ² of the RMS over 8 N - 6 degrees of freedom, N markers): nothing
-# else checks the first view. One rain-hit corner (2.7 px) in the view that placed a stern camera left an
-# RMS of 0.35 px (clean views: 0.03 median) and put the topside 145 mm off at 6σ (procedure 3, CRF 16)
+# CORNER_NOISE_PX would at this probability (χ² of the RMS over 8 N - 6 degrees of freedom, N markers)
 SURVEY_GATE_CHI2 = GATE_CHI2[3]  # a camera's surveyed position (rig: position, position_sigma) is applied when its
-# first view places it, unless it lies beyond this (99.9 %, 3 degrees of freedom) from that placement: a survey of
-# the wrong camera or in another frame is reported (survey_conflicts), not trusted
+# first view places it, unless it lies beyond this from that placement: then reported (survey_conflicts), not trusted
 
 
 @dataclass(frozen=True)
