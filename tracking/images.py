@@ -226,16 +226,19 @@ def passes_through(stream: av.video.stream.VideoStream) -> bool:
 
 
 def decoded_frames(container: av.container.InputContainer, source: str | Path, time_offset: float = 0.0,
-                   keep_color: bool = False, packets: bool = False, health: VideoHealth | None = None
-                   ) -> Iterator[Frame]:
+                   keep_color: bool = False, packets: bool = False, health: VideoHealth | None = None,
+                   chunk: tuple[int | None, int | None] | None = None, threads: str = "AUTO") -> Iterator[Frame]:
     """Frames of an open container; capture time = presentation time + time_offset.
 
     With packets=True, each frame also carries its H.264 packet in Annex B (when the stream passes through).
     health: filled as the frames go (see VideoHealth); a frame whose time is not after the previous one, or decoded
     from a damaged packet, is dropped.
+    chunk: (pts of a keyframe, None for the first; packets to decode from it, None for all): only that part of the
+    video, decoded on its own (the decoder flushed after its last packet); frame numbers count from the keyframe
+    (tracking.parallel puts them back).
     """
     stream = container.streams.video[0]
-    stream.thread_type = "AUTO"
+    stream.thread_type = threads
     health = health if health is not None else VideoHealth()
     health.declare(container, source)
     annexb = (av.bitstream.BitStreamFilterContext("h264_mp4toannexb", stream)
@@ -246,7 +249,7 @@ def decoded_frames(container: av.container.InputContainer, source: str | Path, t
     cut = False  # a packet cut short (a truncated file's last) or damaged went to the decoder
     damaged: set[int] = set()  # pts of such packets whose frames have not come out
     try:
-        for packet in container.demux(stream):
+        for packet in chunk_packets(container, stream, chunk):
             pts, key = packet.pts, packet.is_keyframe
             health.packets += packet.size > 0  # the last one, empty, only flushes the decoder
             if packet.is_corrupt:
@@ -277,6 +280,33 @@ def decoded_frames(container: av.container.InputContainer, source: str | Path, t
     except av.error.FFmpegError as exc:
         raise InputError(source, f"video is damaged after frame {index} ({exc.strerror or exc})") from None
     health.finish()
+
+
+def chunk_packets(container: av.container.InputContainer, stream: av.video.stream.VideoStream,
+                  chunk: tuple[int | None, int | None] | None) -> Iterator[av.Packet]:
+    """The stream's packets: all of them, or a chunk's (keyframe pts or None for the first, packet count or None)
+    then an empty packet that flushes the decoder. A seek that does not land on the keyframe raises ValueError."""
+    if chunk is None:
+        yield from container.demux(stream)
+        return
+    start, count = chunk
+    if start is not None:
+        container.seek(start, stream=stream, backward=True, any_frame=False)
+    n = 0
+    for packet in container.demux(stream):
+        if start is not None and n == 0 and packet.size and (packet.pts != start or not packet.is_keyframe):
+            raise ValueError(f"seeking to the keyframe at pts {start} landed on pts {packet.pts}")
+        if count is not None and n >= count and packet.size:
+            break
+        size = packet.size  # the Annex B filter takes a packet's data once decoded
+        n += size > 0
+        yield packet
+        if not size:
+            return  # the demuxer's own flush: the end of the video
+    flush = av.Packet()
+    flush.stream = stream
+    flush.time_base = stream.time_base  # the frames it flushes out take their time base from it
+    yield flush
 
 
 def luma(frame: av.VideoFrame) -> np.ndarray:

@@ -1,0 +1,407 @@
+"""Offline tracking on every core, or on a Ray cluster: each camera's video cut into chunks that start at keyframes,
+decoded, searched and posed in worker processes (or Ray tasks), put back in capture-time order on the main process.
+
+The chunks depend on the videos and CHUNK_FRAMES only, never on how many workers run them, so the output is the same
+for every number of workers. A chunk is decoded on its own from its keyframe; a detector with state (MarkerTracker)
+starts afresh at each chunk. The main process replays every decoded frame's presentation time through one
+VideoHealth per camera, in order, so frame numbers, dropped frames and the video's health (and the warnings made from
+them) are those of one pass over the whole video. A video that cannot be cut safely (no timestamps, damaged packets,
+B-frames, not a file) is one chunk.
+"""
+
+from __future__ import annotations
+
+import heapq
+import os
+import resource
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Protocol
+
+from tracking.detection import DEFAULT_REFINEMENT, Refinement
+from tracking.errors import InputError
+from tracking.images import VideoHealth, decoded_frames, frames, is_image, open_video
+from tracking.pipeline import CameraTracker, FrameResult, TrackStats
+from tracking.rig import CameraEntry, Rig, load_rig
+
+CHUNK_FRAMES = 300  # a chunk starts at the first keyframe this many frames or more after the previous chunk's start
+# (20 s at 15 FPS): long enough that a Ray task's overhead is amortised (benchmarks/results/scale.md)
+RAY_INSTALL = "pip install 'topside[cluster]'"  # what `--ray` says when Ray is not installed
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One part of one camera's video: from a keyframe, a number of packets (None: to the end, or all of it)."""
+
+    camera: str
+    number: int  # within the camera, from 0
+    start_pts: int | None  # the keyframe's presentation time in stream ticks (None: from the start, no seek)
+    packets: int | None  # packets to decode (None: to the end)
+    packets_before: int  # the video's packets before the keyframe
+    start_time: float  # capture time of the keyframe, s (the order chunks are handed out in)
+
+
+@dataclass(frozen=True)
+class VideoPlan:
+    """How one camera's video is cut, and its declared size and nominal interval (a VideoHealth, declared)."""
+
+    camera: str
+    chunks: tuple[Chunk, ...]
+    health: VideoHealth
+    frames: int  # packets, for progress bars
+    whole_reason: str = ""  # why the video is one chunk ('' when it was cut at its keyframes or is too short)
+
+
+@dataclass(frozen=True)
+class ChunkTask:
+    """What a worker needs to track one chunk: everything by value or by path (every node sees the videos)."""
+
+    rig_path: Path
+    chunk: Chunk
+    refinement: Refinement = DEFAULT_REFINEMENT
+    packets: bool = False  # keep each frame's H.264 packet (a recording or an archive is written)
+    keep_gray: bool = False  # send the pixels back (a recording of a source without H.264)
+    roi_tracking: bool = False
+    threads: str = "AUTO"  # the decoder's threading: AUTO (one worker), SLICE or NONE for many
+
+
+@dataclass
+class ChunkResult:
+    """A chunk's frames, tracked, and every decoded frame's presentation time as the decoder stamped it."""
+
+    chunk: Chunk
+    stamps: list[tuple[float | None, bool, int]] = field(default_factory=list)  # (pts s, damaged, packets read)
+    results: dict[int, FrameResult] = field(default_factory=dict)  # stamp number -> its frame, tracked
+    packets_read: int = 0
+    error: tuple[str, str, str | None] | None = None  # an InputError met (source, message, field)
+    seconds: float = 0.0  # wall time the chunk took in its worker
+    cpu_seconds: float = 0.0
+    max_rss_mb: float = 0.0  # the worker's peak resident memory so far
+    worker: str = ""  # host:pid
+    still: bool = False  # a still image: one frame, no decoder (its result as it is)
+
+
+@dataclass
+class StampLog(VideoHealth):
+    """A VideoHealth that also keeps every decoded frame's presentation time, whether damaged, and the packets read
+    by then, for the main process to replay (its copies share the list)."""
+
+    stamps: list[tuple[float | None, bool, int]] = field(default_factory=list)
+
+    def stamp(self, pts: float | None, damaged: bool = False) -> float | None:
+        self.stamps.append((pts, damaged, self.packets))
+        return super().stamp(pts, damaged)
+
+
+def source_path(rig: Rig, entry: CameraEntry) -> Path | str:
+    """A camera's source as CameraTracker.run opens it: a path, or a URL as it is."""
+    path = rig.resolve(entry.source)
+    return path if path.exists() or not entry.source.startswith(("rtsp:", "http:", "https:")) else entry.source
+
+
+def plan_video(rig: Rig, entry: CameraEntry, chunk_frames: int = CHUNK_FRAMES) -> VideoPlan:
+    """Cut one camera's video at keyframes (reads its packets, decodes nothing); a video that cannot be cut safely, a
+    still image or a stream is one chunk."""
+    src = source_path(rig, entry)
+    health = VideoHealth()
+
+    def whole(reason: str, count: int | None = None) -> VideoPlan:
+        return VideoPlan(entry.name, (Chunk(entry.name, 0, None, None, 0, entry.time_offset),), health, count or 0,
+                         reason)
+
+    if isinstance(src, str) or is_image(src) or not Path(src).is_file():
+        return whole("not a video file")
+    with open_video(src) as container:
+        stream = container.streams.video[0]
+        health.declare(container, src)
+        if stream.codec_context.has_b_frames:
+            return whole("B-frames")
+        base = stream.time_base
+        keys: list[tuple[int, int]] = []  # (packets before, pts)
+        n = 0
+        last_key_pts = None
+        try:
+            for packet in container.demux(stream):
+                if not packet.size:
+                    continue
+                if packet.pts is None or packet.is_corrupt:
+                    return whole("packets without timestamps" if packet.pts is None else "damaged packets")
+                if packet.is_keyframe:
+                    if last_key_pts is not None and packet.pts <= last_key_pts:
+                        return whole("keyframe timestamps not increasing")
+                    keys.append((n, packet.pts))
+                    last_key_pts = packet.pts
+                n += 1
+        except Exception:  # the decoder says what is wrong with it, once it gets there
+            return whole("unreadable packets")
+    if not keys or keys[0][0] != 0 or base is None:
+        return whole("does not start with a keyframe", n)
+    starts = [keys[0]]
+    for before, pts in keys[1:]:
+        if before - starts[-1][0] >= chunk_frames:
+            starts.append((before, pts))
+    chunks = []
+    for k, (before, pts) in enumerate(starts):
+        count = starts[k + 1][0] - before if k + 1 < len(starts) else None
+        chunks.append(Chunk(entry.name, k, pts if k else None, count, before,
+                            float(pts * base) + entry.time_offset))
+    return VideoPlan(entry.name, tuple(chunks), health, n)
+
+
+_RIGS: dict[tuple[str, float], Rig] = {}
+
+
+def _rig(path: Path) -> Rig:
+    """A worker's rig, loaded once per process."""
+    key = (str(path), Path(path).stat().st_mtime)
+    if key not in _RIGS:
+        _RIGS[key] = load_rig(path)
+    return _RIGS[key]
+
+
+def run_chunk(task: ChunkTask) -> ChunkResult:
+    """Track one chunk (in a worker process, a Ray task or in place): a fresh detector, a decoder of its own."""
+    import cv2
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    cv2.setNumThreads(1)  # the workers use the cores already
+    rig = _rig(task.rig_path)
+    entry = next(c for c in rig.cameras if c.name == task.chunk.camera)
+    tracker = CameraTracker.from_rig(rig, entry, task.refinement, packets=task.packets,
+                                     roi_tracking=task.roi_tracking)
+    out = ChunkResult(task.chunk)
+    log = StampLog()
+    src = source_path(rig, entry)
+    chunk = task.chunk
+    try:
+        if chunk.start_pts is None and chunk.packets is None:  # the whole video (or image, or stream) in one
+            source = frames(src, entry.time_offset, packets=task.packets, health=log)
+        else:
+            container = open_video(src)
+            source = _closing(container, decoded_frames(container, src, entry.time_offset, packets=task.packets,
+                                                        health=log, chunk=(chunk.start_pts, chunk.packets),
+                                                        threads=task.threads))
+        for frame in source:
+            result = tracker.process(frame)
+            keep = task.keep_gray and frame.packet is None
+            out.results[len(log.stamps) - 1] = replace(
+                result, frame=replace(frame, gray=frame.gray if keep else None, bgr=None, video=None))
+    except InputError as exc:
+        out.error = (exc.source, exc.message, exc.field)
+    out.stamps = log.stamps
+    out.still = is_image(src)
+    out.packets_read = log.packets
+    out.seconds = time.perf_counter() - t0
+    out.cpu_seconds = time.process_time() - c0
+    out.max_rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    out.worker = f"{os.uname().nodename}:{os.getpid()}"
+    return out
+
+
+def _closing(container: Any, items: Iterator[Any]) -> Iterator[Any]:
+    """items, then the container closed."""
+    with container:
+        yield from items
+
+
+class Runner(Protocol):
+    """Runs chunk tasks somewhere: submit returns a handle, wait its ChunkResult."""
+
+    def submit(self, task: ChunkTask) -> Any: ...
+
+    def wait(self, handle: Any) -> ChunkResult: ...
+
+    workers: int
+
+
+class InPlace:
+    """Runs each chunk in this process when its result is wanted (--workers 1)."""
+
+    workers = 1
+
+    def submit(self, task: ChunkTask) -> Any:
+        return task
+
+    def wait(self, handle: Any) -> ChunkResult:
+        return run_chunk(handle)
+
+    def close(self) -> None:
+        pass
+
+
+def _worker_init() -> None:
+    """A worker process: one thread for OpenCV, and it ends with its parent."""
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+class LocalPool:
+    """Worker processes on this machine (spawned: no state inherited from the parent)."""
+
+    def __init__(self, workers: int) -> None:
+        import multiprocessing as mp
+
+        self.workers = workers
+        self.pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_worker_init)
+
+    def submit(self, task: ChunkTask) -> Future:
+        return self.pool.submit(run_chunk, task)
+
+    def wait(self, handle: Future) -> ChunkResult:
+        return handle.result()
+
+    def close(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+class RayRunner:
+    """Chunks as Ray tasks: a cluster at address (ray://host:10001, or 'auto'), or a local Ray with `workers` CPUs
+    when address is '' (or 'local')."""
+
+    def __init__(self, address: str = "", workers: int | None = None) -> None:
+        ray = import_ray()
+        self.ray = ray
+        self.started = False
+        if not ray.is_initialized():
+            local = address in ("", "local")
+            ray.init(address=None if local else address, num_cpus=workers if local else None,
+                     include_dashboard=False, log_to_driver=False, configure_logging=False)
+            self.started = True
+        self.workers = int(ray.cluster_resources().get("CPU", 1))
+        self.remote = ray.remote(num_cpus=1, max_retries=2)(run_chunk)
+
+    def submit(self, task: ChunkTask) -> Any:
+        return self.remote.remote(task)
+
+    def wait(self, handle: Any) -> ChunkResult:
+        return self.ray.get(handle)
+
+    def close(self) -> None:
+        if self.started:
+            self.ray.shutdown()
+
+
+def import_ray() -> Any:
+    """The ray module, or a one-line InputError saying how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise InputError("--ray", f"needs Ray, which is not installed (install it with: {RAY_INSTALL})") from None
+    return ray
+
+
+def runner(workers: int | None = None, ray_address: str | None = None) -> InPlace | LocalPool | RayRunner:
+    """Where the chunks run: Ray when an address is given ('' for a local Ray), else `workers` local processes (None:
+    every core; 1: this process)."""
+    if ray_address is not None:
+        return RayRunner(ray_address, workers)
+    workers = workers or os.cpu_count() or 1
+    return InPlace() if workers == 1 else LocalPool(workers)
+
+
+class Scheduler:
+    """Hands chunks out in capture-time order, keeping at most `window` submitted and not yet taken, and gives each
+    back when asked for (submitting up to it first when needed)."""
+
+    def __init__(self, run: Runner, tasks: list[ChunkTask], window: int) -> None:
+        self.run = run
+        self.todo = deque(sorted(tasks, key=lambda t: (t.chunk.start_time, t.chunk.number)))
+        self.window = max(window, 1)
+        self.handles: dict[tuple[str, int], Any] = {}
+        self.done: list[ChunkResult] = []  # for benchmarks: every result, its timings
+        self._fill()
+
+    def _submit(self) -> None:
+        task = self.todo.popleft()
+        self.handles[(task.chunk.camera, task.chunk.number)] = self.run.submit(task)
+
+    def _fill(self) -> None:
+        while self.todo and len(self.handles) < self.window:
+            self._submit()
+
+    def take(self, chunk: Chunk) -> ChunkResult:
+        key = (chunk.camera, chunk.number)
+        while key not in self.handles:
+            self._submit()
+        handle = self.handles.pop(key)
+        self._fill()
+        result = self.run.wait(handle)
+        self.done.append(result)
+        self._fill()
+        return result
+
+
+def replay(plan: VideoPlan, take: Callable[[Chunk], ChunkResult], time_offset: float, health: VideoHealth,
+           first_warning: bool = True) -> Iterator[FrameResult]:
+    """One camera's frames from its chunks' results, as one pass over the video gives them: frame numbers, dropped
+    frames and health replayed through `health` (declared as the plan's), the last frame carrying the health at the
+    video's end, a chunk's InputError raised where it was met."""
+    held: FrameResult | None = None
+    seen_first = not first_warning
+    for chunk in plan.chunks:
+        result = take(chunk)
+        if result.still:
+            yield from result.results.values()
+            continue
+        for k, (pts, damaged, read) in enumerate(result.stamps):
+            health.packets = chunk.packets_before + read
+            t = health.stamp(pts, damaged)
+            if t is None:
+                continue  # dropped here (the chunk's own pass may have kept it: it did not see the frames before)
+            r = result.results.get(k)
+            if r is None or r.frame.time != t + time_offset:
+                raise RuntimeError(f"{plan.camera}: chunk {chunk.number} disagrees with its video at frame {k}")
+            warnings = r.warnings if not seen_first else ()
+            seen_first = True
+            r = replace(r, frame=replace(r.frame, index=health.decoded - 1, video=health.report()), warnings=warnings)
+            if held is not None:
+                yield held
+            held = r
+        if result.error is not None:
+            raise InputError(*result.error)
+        health.packets = chunk.packets_before + result.packets_read
+    health.finish()
+    if held is not None:
+        end = health.report()
+        assert held.frame.video is not None
+        yield replace(held, frame=replace(held.frame, video=replace(end, news=held.frame.video.news + end.news)))
+
+
+def plan_rig(rig: Rig, cameras: list[str] | None = None, chunk_frames: int = CHUNK_FRAMES) -> list[VideoPlan]:
+    """Every camera's plan (one line of error for a camera that cannot be read)."""
+    entries = [c for c in rig.cameras if cameras is None or c.name in cameras]
+    if not entries:
+        raise InputError(rig.path, "no cameras to track (expected at least one)", "cameras")
+    for e in entries:
+        src = source_path(rig, e)
+        if not isinstance(src, str) and not Path(src).is_file():
+            raise InputError(src, "image or video not found")
+    return [plan_video(rig, e, chunk_frames) for e in entries]
+
+
+def track_chunks(rig: Rig, run: Runner, refinement: Refinement = DEFAULT_REFINEMENT, packets: bool = False,
+                 keep_gray: bool = False, roi_tracking: bool = False, stats: TrackStats | None = None,
+                 plans: list[VideoPlan] | None = None, chunk_frames: int = CHUNK_FRAMES,
+                 window: int | None = None, scheduler: list[Scheduler] | None = None) -> Iterator[FrameResult]:
+    """All cameras of a rig, tracked chunk by chunk by `run`, merged into one stream ordered by capture time (as
+    pipeline.track_rig gives it). stats: as track_rig's. scheduler: a list that gets the Scheduler (benchmarks)."""
+    if rig.path is None:
+        raise InputError("rig", "has no file (the workers read it)")
+    plans = plans if plans is not None else plan_rig(rig, chunk_frames=chunk_frames)
+    entries = {c.name: c for c in rig.cameras}
+    healths = {p.camera: replace(p.health) for p in plans}
+    if stats is not None:
+        stats.videos.update(healths)
+    threads = "AUTO" if run.workers == 1 else "SLICE"
+    tasks = [ChunkTask(Path(rig.path), c, refinement, packets, keep_gray, roi_tracking, threads)
+             for p in plans for c in p.chunks]
+    sched = Scheduler(run, tasks, window or max(2 * run.workers, run.workers + len(plans)))
+    if scheduler is not None:
+        scheduler.append(sched)
+    streams = [replay(p, sched.take, entries[p.camera].time_offset, healths[p.camera]) for p in plans]
+    yield from heapq.merge(*streams, key=lambda r: r.time)
