@@ -65,6 +65,16 @@ def _archive_options(key: Path | None, video: str) -> Ed25519PrivateKey | None:
 
 EXIT_INTERRUPTED = 130  # the shell's code for a command ended by Ctrl-C
 
+# Options shared by `track` and `batch`: where the chunks of the videos are tracked.
+CHUNK_FRAMES_DEFAULT = 300  # tracking.parallel.CHUNK_FRAMES (not imported here: the CLI starts fast)
+WorkersOption = Annotated[int | None, typer.Option(min=1, help="Worker processes that decode and detect (default: "
+                                                             "every core; 1: in this process).")]
+RayOption = Annotated[str | None, typer.Option(metavar="[ADDRESS]", help="Run the chunks as Ray tasks: on the "
+                                               "cluster at ADDRESS (ray://HOST:10001 or auto), or, without ADDRESS, "
+                                               "on a Ray started here with --workers CPUs. Needs topside[cluster].")]
+ChunkOption = Annotated[int, typer.Option(min=1, help="A chunk of a video starts at the first keyframe this many "
+                                                      "frames after the previous chunk's start.")]
+
 
 def _finite(low: float, low_open: bool = True, high: float = math.inf, allow_inf: bool = False
             ) -> Callable[[float | None], float | None]:
@@ -258,10 +268,17 @@ def track(
     vessel: VesselOption = "",
     operator: OperatorOption = "",
     video: VideoOption = "jpeg",
+    workers: WorkersOption = None,
+    ray: RayOption = None,
+    chunk_frames: ChunkOption = CHUNK_FRAMES_DEFAULT,
 ) -> None:
-    """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording."""
+    """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording.
+
+    Each camera's video is cut into chunks at keyframes, tracked in worker processes (--workers) or Ray tasks
+    (--ray) and fused here in capture-time order: the output is the same whatever runs the chunks."""
     from tracking.evaluate import read_truth
-    from tracking.pipeline import TrackStats, source_frame_count, track_rig
+    from tracking.parallel import plan_rig, runner, track_chunks
+    from tracking.pipeline import TrackStats
     from tracking.report import OffsetsWriter
     from tracking.rig import load_rig
 
@@ -275,10 +292,11 @@ def track(
     private = _archive_options(key, video) if mcap is not None else None  # read before any work starts
     options = {"mode": mode, "refine": refine.value}
     stats = TrackStats()
-    totals = [source_frame_count(the_rig.resolve(c.source)) for c in the_rig.cameras]
-    total = sum(t for t in totals if t) or None
+    plans = plan_rig(the_rig, chunk_frames=chunk_frames)
+    total = sum(p.frames for p in plans) or None
     outputs = Outputs(keep_on_interrupt=True)
     writer: OffsetsWriter | None = None
+    run = runner(workers, ray)
     try:
         with outputs, _progress() as progress:
             csv_partial = outputs.claim(out)
@@ -294,7 +312,8 @@ def track(
             task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras", total=total)
 
             def measurements():
-                for result in track_rig(the_rig, refine, packets=bool(sinks), stats=stats):
+                for result in track_chunks(the_rig, run, refine, packets=bool(sinks), keep_gray=bool(sinks),
+                                           stats=stats, plans=plans):
                     stats.add(result)
                     progress.advance(task)
                     _warn_lines(result.warnings)
@@ -317,6 +336,8 @@ def track(
         err_console.print(f"stopped after {writer.rows if writer else 0} rows; what was written is kept in {kept}",
                           markup=False)
         raise typer.Exit(EXIT_INTERRUPTED) from None
+    finally:
+        run.close()
     _print_track_summary(the_rig, rig, mode, stats)
     console.print(f"wrote {writer.rows if writer else 0} rows to {out}")
     if rrd is not None:
@@ -946,12 +967,22 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+def _ray_address_optional(args: list[str]) -> list[str]:
+    """`--ray` given without an address (last, or before another option) means a Ray started here: "local"."""
+    out = list(args)
+    for i in range(len(out) - 1, -1, -1):
+        if out[i] == "--ray" and (i + 1 == len(out) or out[i + 1].startswith("-")):
+            out.insert(i + 1, "local")
+    return out
+
+
 def main() -> None:
     """Console entry point: bad input (files, options, usage) becomes one line on stderr and exit status 2."""
     if len(sys.argv) <= 1:  # no command: the help, as typer prints it
         app()
         return
     signal.signal(signal.SIGTERM, _interrupt)
+    sys.argv[1:] = _ray_address_optional(sys.argv[1:])
     try:
         code = app(standalone_mode=False)
     except InputError as exc:
