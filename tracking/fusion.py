@@ -63,6 +63,9 @@ REPORT_WARMUP_SIGMA_M = 0.025  # this: the first seconds' camera poses are poorl
 SMOOTHER_SPAN_S = 30.0  # recorded runs are smoothed this much at a time, each time with SMOOTHER_LAG_S of the
 SMOOTHER_LAG_S = 45.0  # future after it: memory holds both, not the whole run; a still camera gains from the far future
 JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
+PAIR_POSITION_SIGMA_M = 0.01  # how the filter weighs a pair's topside position against its rotation, for carrying
+PAIR_ROTATION_SIGMA_RAD = 0.01  # survey errors to the cones (survey_covariance): a marker's rotation as well known as
+# its position over 1 m (a 1 m marker at 20-40 m: its position to a centimetre or so, its rotation to half a degree)
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame (edge-fit corners in fog and rain: 0.1 px median)
 VIEW = 8  # bias states per view (camera, marker): one per corner coordinate
 VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that stays while its marker's image stays
@@ -394,6 +397,46 @@ def cone_points(rig: Rig) -> dict[str, np.ndarray]:
     return points
 
 
+def survey_covariance(rig: Rig) -> dict[str, np.ndarray]:
+    """(3, 3) covariance, per cone, that the markers' survey errors (rig.marker_sigma) add to its offset: errors the
+    footage cannot average away, since they do not change while the markers stay.
+
+    Each pair places the topside through its two markers: a jacket marker off by (δθ_W, δp_W) turns and shifts the
+    view about it (a camera placed by a tilted marker is tilted with it), a topside marker off by (δθ_S, δp_S) does
+    the same to the topside, so the pair puts its topside marker's centre c_S off by δp_W - δp_S + δθ_W × (c_S - c_W)
+    and the topside's rotation off by δθ_W - δθ_S. The filter weighs the pairs' positions and rotations as the corners
+    tell them (PAIR_POSITION_SIGMA_M against PAIR_ROTATION_SIGMA_RAD: pairs at cones 20 m apart fix the rotation by
+    their positions, two pairs at one cone partly by their markers' orientations); that fit carries the survey errors
+    to every cone. Zero without a survey σ."""
+    markers = rig.marker_by_id
+    weight = np.diag([PAIR_POSITION_SIGMA_M**-2] * 3 + [PAIR_ROTATION_SIGMA_RAD**-2] * 3)
+    info, spread = np.zeros((6, 6)), np.zeros((6, 6))
+    for pair in rig.all_pairs():
+        W, S = markers[pair.jacket], markers[pair.topside]
+        c_w, c_s = np.array(W.center, dtype=float), np.array(S.center, dtype=float)
+        J = np.zeros((6, 12))  # (error at c_S, rotation error) by (δθ_W, δp_W, δθ_S, δp_S)
+        J[:3, :3] = -skew(c_s - c_w)
+        J[:3, 3:6] = np.eye(3)
+        J[3:, :3] = np.eye(3)
+        J[:3, 9:12] = -np.eye(3)
+        J[3:, 6:9] = -np.eye(3)
+        variances = np.zeros(12)
+        for k, marker in enumerate((W, S)):
+            sigma = rig.marker_sigma(marker)
+            if sigma is not None:
+                variances[6 * k:6 * k + 6] = np.concatenate([sigma.tilt_rad(), sigma.position()]) ** 2
+        G = np.eye(6)  # (offset at c_S, rotation) of the topside pose (t, ω): o = t - [c_S]× ω
+        G[:3, 3:] = -skew(c_s)
+        info += G.T @ weight @ G
+        spread += G.T @ weight @ J @ np.diag(variances) @ J.T @ weight @ G
+    if not spread.any():
+        return {}
+    M = np.linalg.inv(info)
+    pose = M @ spread @ M.T
+    return {cone: point_offset_matrix(r)[:, :6] @ pose @ point_offset_matrix(r)[:, :6].T
+            for cone, r in cone_points(rig).items()}
+
+
 @dataclass
 class TopsideFilter:
     """The Kalman filter of one installation: the topside and every camera of the rig."""
@@ -428,6 +471,7 @@ class TopsideFilter:
         markers = self.rig.marker_by_id
         self.topside_points = {m.id: np.array(m.center) for m in markers.values() if m.body == "topside"}
         self.cones = cone_points(self.rig)
+        self.survey_cov = survey_covariance(self.rig)  # cone -> (3, 3) added to its offset's covariance
         self.surveys = {c.name: (np.array(c.position, dtype=float), float(c.position_sigma)) for c in self.rig.cameras
                         if c.position is not None and c.position_sigma is not None}  # camera -> (position (3,), σ m)
 
@@ -856,7 +900,7 @@ class TopsideFilter:
         out = []
         for cone, r in sorted(self.cones.items()):
             H = point_offset_matrix(r)
-            cov = H @ P[:STATE, :STATE] @ H.T
+            cov = H @ P[:STATE, :STATE] @ H.T + self.survey_cov.get(cone, 0.0)
             offset = H @ x[:STATE] if np.sqrt(np.diag(cov)).max() <= limit else np.full(3, np.nan)
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses))
         return out

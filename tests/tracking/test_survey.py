@@ -1,0 +1,135 @@
+"""topside survey's bundle adjustment on synthetic corners: markers displaced and tilted by known amounts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.synthetic import CAMERA_EYES, CONE_A, JACKET_MARKER_Z, MATED_RISE, PAPER_K, look_at, rig_dict
+from tracking.errors import InputError
+from tracking.offsets import BodyObservation
+from tracking.pose import BodyPose, Choice, marker_object_points
+from tracking.rig import Rig
+from tracking.survey import rodrigues, rotvec, survey_markers, surveyed_rig
+
+FPS = 10.0
+SECONDS = 20.0
+CORNER_NOISE_PX = 0.05
+# true minus surveyed pose of each non-reference marker: centre (m) and rotation vector (degrees), body frame
+DISPLACED = {3: (np.array([0.015, -0.02, 0.01]), np.array([0.8, -0.5, 0.3])),
+             4: (np.array([-0.01, 0.012, -0.018]), np.array([-0.4, 0.9, -0.6]))}
+REFERENCES = (1, 2)  # one per body: jacket 1 and topside 2, held as the datum
+
+
+def topside_motion(t: float) -> np.ndarray:
+    """(4, 4) T_jacket_topside: a swing and creep with a slight twist."""
+    T = np.eye(4)
+    T[:3, :3] = rodrigues(np.radians([0.3 * np.sin(t / 3), 0.2 * np.cos(t / 4), 0.5 * np.sin(t / 5)])[None])[0]
+    T[:3, 3] = [0.2 * np.sin(t / 2), 0.05 * t - 0.5, 0.3 + 0.1 * np.cos(t / 3)]
+    return T
+
+
+def rig(survey: bool = True, references: tuple[int, ...] = REFERENCES) -> Rig:
+    data = rig_dict([{"name": n, "calibration": f"{n}.yaml", "source": f"{n}.mp4", "mount": "drone"}
+                     for n in CAMERA_EYES])
+    for m in data["markers"]:
+        m["reference"] = m["id"] in references
+    if survey:
+        data["survey_sigma"] = {"position_m": 0.02, "tilt_deg": 1.0}
+        data["survey_tolerance"] = {"position_m": 0.05, "tilt_deg": 3.0}
+    return Rig.model_validate(data)
+
+
+def true_T_body_marker(the_rig: Rig, marker_id: int) -> np.ndarray:
+    T = the_rig.marker_by_id[marker_id].T_body_marker.copy()
+    if marker_id in DISPLACED:
+        moved, turned = DISPLACED[marker_id]
+        T[:3, :3] = rodrigues(np.radians(turned)[None])[0] @ T[:3, :3]
+        T[:3, 3] += moved
+    return T
+
+
+def observations(the_rig: Rig, seed: int = 0) -> list[BodyObservation]:
+    """Both cameras' frames: every marker's corners projected from where it truly is, with noise; each frame's jacket
+    pose to start from as a one-frame estimate would give it (off by a little)."""
+    rng = np.random.default_rng(seed)
+    target = CONE_A + np.array([0.0, 0.0, JACKET_MARKER_Z + MATED_RISE / 2])
+    obj = marker_object_points(the_rig.marker_size)
+    out = []
+    for k, t in enumerate(np.arange(0.0, SECONDS, 1 / FPS)):
+        for name, eye in CAMERA_EYES.items():
+            sway = 0.05 * np.array([np.sin(t + k), np.cos(1.3 * t), 0.0])
+            T_camera_jacket = np.linalg.inv(look_at(eye + sway, target))
+            corners = {}
+            for m in the_rig.markers:
+                T = T_camera_jacket @ (topside_motion(t) if m.body == "topside" else np.eye(4)) \
+                    @ true_T_body_marker(the_rig, m.id)
+                X = obj @ T[:3, :3].T + T[:3, 3]
+                uv = X @ PAPER_K.T
+                corners[m.id] = uv[:, :2] / uv[:, 2:] + rng.normal(0.0, CORNER_NOISE_PX, (4, 2))
+            start = T_camera_jacket.copy()
+            start[:3, 3] += rng.normal(0.0, 0.02, 3)
+            jacket = BodyPose("jacket", (1, 3), start, 1e-4 * np.eye(6), 0.1, Choice.UNIQUE)
+            out.append(BodyObservation(float(t), name, jacket, None, corners, PAPER_K))
+    return out
+
+
+def test_displaced_markers_are_found_within_their_sigma() -> None:
+    the_rig = rig()
+    fit = survey_markers(the_rig, observations(the_rig))
+    assert fit.rms_px < 2 * CORNER_NOISE_PX
+    by_id = {s.id: s for s in fit.markers}
+    for mid in REFERENCES:
+        assert by_id[mid].reference and not np.any(by_id[mid].position_m)
+    for mid, (moved, turned) in DISPLACED.items():
+        s = by_id[mid]
+        err_mm = (s.position_m - moved) * 1e3
+        err_deg = np.degrees(s.rotation_rad) - turned
+        assert np.all(np.abs(err_mm) < 2.0), err_mm  # the issue's target is 5 mm and 0.2°
+        assert np.all(np.abs(err_deg) < 0.1), err_deg
+        assert np.all(np.abs(err_mm) < 4 * s.sigma_m * 1e3 + 0.2), (err_mm, s.sigma_m)  # an honest σ
+        assert np.all(s.sigma_m < 0.005) and s.learnt > 0.75  # the footage told it
+        assert not s.flagged
+    surveyed = surveyed_rig(the_rig, fit)
+    for mid in DISPLACED:
+        m = surveyed.marker_by_id[mid]
+        assert np.allclose(m.center, np.add(the_rig.marker_by_id[mid].center, by_id[mid].position_m), atol=1e-6)
+        assert m.correction is not None and m.sigma is not None
+        angle = np.degrees(np.linalg.norm(rotvec(m.R_body_marker @ true_T_body_marker(the_rig, mid)[:3, :3].T)))
+        assert angle < 0.1
+    for p in surveyed.pairs:  # mated offsets follow the corrected centres
+        by = surveyed.marker_by_id
+        assert np.allclose(p.mated, np.subtract(by[p.topside].center, by[p.jacket].center), atol=1e-6)
+
+
+def test_a_marker_moved_beyond_the_tolerance_is_flagged() -> None:
+    the_rig = rig()
+    data = the_rig.model_dump(exclude_none=True)
+    data["survey_tolerance"] = {"position_m": 0.005, "tilt_deg": 3.0}  # the displacements are 18-25 mm
+    fit = survey_markers(Rig.model_validate(data), observations(the_rig, seed=1))
+    assert {s.id for s in fit.markers if s.flagged} == set(DISPLACED)
+
+
+def test_without_a_survey_sigma_it_says_what_it_needs() -> None:
+    the_rig = rig(survey=False)
+    with pytest.raises(InputError, match="survey_sigma"):
+        survey_markers(the_rig, observations(the_rig)[:40])
+
+
+def test_the_filter_widens_its_sigma_by_the_survey_sigma() -> None:
+    from tracking.fusion import TopsideFilter, survey_covariance
+
+    assert survey_covariance(rig(survey=False, references=())) == {}
+    surveyed = rig(references=())
+    cov = survey_covariance(surveyed)
+    sd = np.sqrt(np.diag(cov["A"]))
+    # two pairs at cone A, each off by both markers' 20 mm (28 mm an axis) and its jacket marker's 1° over the
+    # 1.8 m lever to its topside marker (31 mm across it), the cone tip 1-2 m from the markers: 2-6 cm an axis
+    assert np.all(sd > 0.015) and np.all(sd < 0.06), sd
+    kf = TopsideFilter(surveyed)
+    kf.time = 0.0
+    (est,) = kf.cone_estimates(cameras=(), warming=False)
+    assert np.all(np.diag(est.covariance) >= np.diag(cov["A"]))  # the filter's own σ, widened by the survey's
+    # a reference marker is exact: with both of a pair's markers references only the other pair's errors remain
+    held = survey_covariance(rig(references=(1, 2)))
+    assert np.all(np.diag(held["A"]) < np.diag(cov["A"]))
