@@ -8,6 +8,7 @@ import rerun.blueprint as rrb
 from rerun import bindings
 
 from tracking.rig import Rig
+from viewer.recording import TIMELINE
 
 EYE_OFFSET_M = np.array([-18.0, -44.0, 3.0])  # default 3-D eye: from ahead and starboard, under the deck (as the stern
 # cameras see the cones)
@@ -90,5 +91,5 @@ def analysis_blueprint(rig: Rig, with_truth: bool) -> rrb.Blueprint:
             rrb.Vertical(rrb.TextDocumentView(origin="key", name="key to the plots' colours"),
                          rrb.Grid(*plots, grid_columns=2 if with_truth else 1, name="offsets"), row_shares=[1, 9]),
             column_shares=[3, 3, 3]),
-        rrb.TimePanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed", timeline=TIMELINE),  # capture time, not a camera's frame numbers
         collapse_panels=True)

@@ -243,4 +243,5 @@ def superintendent_blueprint(rig: Rig, cone_cameras: Mapping[str, str]) -> rrb.B
     return rrb.Blueprint(
         rrb.Vertical(rrb.Horizontal(*columns, name="cones"),
                      rrb.TextDocumentView(origin=f"{ROOT}/cameras", name="cameras"), row_shares=[4, 1]),
-        rrb.TimePanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"), rrb.BlueprintPanel(state="collapsed"))
+        rrb.TimePanel(state="collapsed", timeline=TIMELINE),  # else the viewer may pick a camera's frame numbers
+        rrb.SelectionPanel(state="collapsed"), rrb.BlueprintPanel(state="collapsed"))

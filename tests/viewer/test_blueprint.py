@@ -4,11 +4,15 @@ import os
 import uuid
 from pathlib import Path
 
+import pytest
 import rerun as rr
 import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
-from viewer.blueprint import LayoutSender
+from tracking.rig import load_rig
+from viewer.blueprint import LayoutSender, analysis_blueprint
+from viewer.recording import TIMELINE
+from viewer.superintendent import superintendent_blueprint
 
 SENDS = 100
 LEAK_LIMIT_MB = 20.0  # rerun's own send_blueprint grew ~0.6 MB a call with this layout: 60 MB over SENDS
@@ -67,3 +71,23 @@ def test_sending_layouts_does_not_grow_memory(tmp_path: Path) -> None:
     rec.flush()
     assert rss_mb() - before < LEAK_LIMIT_MB
     rec.disconnect()
+
+
+def time_panel_timeline(path: Path) -> str:
+    """The timeline a saved layout's time panel shows."""
+    reader = RrdReader(path)
+    [store] = reader.blueprints()
+    rows = [chunk.to_record_batch().to_pydict() for chunk in reader.stream(store=store)
+            if chunk.entity_path == "/time_panel"]
+    return rows[-1]["TimePanelBlueprint:timeline"][-1][0]
+
+
+@pytest.mark.parametrize("layout", ["superintendent", "analysis"])
+def test_both_layouts_open_on_the_capture_time(installation: Path, tmp_path: Path, layout: str) -> None:
+    # Without a timeline named, the web viewer opened a live replay on a camera's frame numbers (frame_stern_A):
+    # the trend plots' axes in frames, the last minute's window not a minute
+    rig = load_rig(installation / "rig.yaml")
+    blueprint = (superintendent_blueprint(rig, {"A": "cam-ahead"}) if layout == "superintendent"
+                 else analysis_blueprint(rig, with_truth=True))
+    blueprint.save("topside", tmp_path / "layout.rbl")
+    assert time_panel_timeline(tmp_path / "layout.rbl") == TIMELINE == "capture_time"
