@@ -354,6 +354,8 @@ def replay(plan: VideoPlan, take: Callable[[Chunk], ChunkResult], time_offset: f
             if t is None:
                 continue  # dropped here (the chunk's own pass may have kept it: it did not see the frames before)
             r = result.results.get(k)
+            if r is None and result.error is not None:
+                raise InputError(*result.error)  # met on this frame (its size, say): where one pass meets it
             if r is None or r.frame.time != t + time_offset:
                 raise RuntimeError(f"{plan.camera}: chunk {chunk.number} disagrees with its video at frame {k}")
             warnings = r.warnings if not seen_first else ()

@@ -1,0 +1,186 @@
+"""Offline tracking in chunks (tracking.parallel): the same output with one worker, two, and Ray in local mode, read
+back through the CSV, rerun's own reader and the MCAP reader; chunks at keyframes; errors and a missing Ray as one
+line."""
+
+from __future__ import annotations
+
+import dataclasses
+import fcntl
+import json
+import os
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tracking.images import VideoHealth
+from tracking.parallel import InPlace, LocalPool, plan_rig, track_chunks
+from tracking.pipeline import TrackStats, track_rig
+from tracking.rig import load_rig
+
+SCENARIO = "config2-procedure5-weather"  # four cameras in fog and rain: the rain pass finds markers too
+DURATION_S = 2.5
+CHUNK = 20  # frames: every camera's 75 frames cut into 2-4 chunks at their keyframes
+TOPSIDE = [sys.executable, "-m", "tracking.cli"]
+VOLATILE = ("software_commit", "written_utc")  # which software and when it wrote: not the data
+
+
+@pytest.fixture(scope="session")
+def clip(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One simulated clip, rendered once even when xdist's workers share the session."""
+    from tracking.sim.command import run_simulate
+
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    folder = shared / f"parallel-{SCENARIO}"
+    with open(shared / f"parallel-{SCENARIO}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (folder / "scenario.yaml").is_file():
+            run_simulate(SCENARIO, folder, duration=DURATION_S, quiet=True)
+    return folder
+
+
+def canon(o: object) -> object:
+    """A value as nested tuples compared exactly (arrays by their bytes); a video's health without the packets read
+    before its end (how many the decoder had taken when a frame came out depends on its threads)."""
+    if isinstance(o, VideoHealth):
+        fields = {f.name: getattr(o, f.name) for f in dataclasses.fields(VideoHealth)}
+        if not o.ended:
+            fields.pop("packets")
+        return canon(fields)
+    if dataclasses.is_dataclass(o):
+        return type(o).__name__, tuple((f.name, canon(getattr(o, f.name))) for f in dataclasses.fields(o))
+    if isinstance(o, np.ndarray):
+        return o.dtype.str, o.shape, o.tobytes()
+    if isinstance(o, dict):
+        return tuple(sorted((repr(k), canon(v)) for k, v in o.items()))
+    if isinstance(o, list | tuple):
+        return tuple(canon(x) for x in o)
+    return repr(o)
+
+
+def results(stream) -> list:
+    return [canon(dataclasses.replace(r, frame=dataclasses.replace(r.frame, gray=None, bgr=None))) for r in stream]
+
+
+def test_chunks_start_at_keyframes_and_cover_every_packet(clip: Path) -> None:
+    import av
+
+    rig = load_rig(clip / "rig.yaml")
+    for plan in plan_rig(rig, chunk_frames=CHUNK):
+        assert len(plan.chunks) >= 2, plan.camera
+        with av.open(str(rig.resolve(next(c.source for c in rig.cameras if c.name == plan.camera)))) as container:
+            stream = container.streams.video[0]
+            keys = [p.pts for p in container.demux(stream) if p.size and p.is_keyframe]
+        assert [c.start_pts for c in plan.chunks[1:]] == [k for k in keys if k in {c.start_pts for c in plan.chunks}]
+        assert all(c.packets >= CHUNK for c in plan.chunks[:-1])
+        assert sum(c.packets or plan.frames - c.packets_before for c in plan.chunks) == plan.frames
+        assert [c.packets_before for c in plan.chunks[1:]] == list(np.cumsum([c.packets for c in plan.chunks[:-1]]))
+
+
+def test_chunked_frames_are_one_pass_frames(clip: Path) -> None:
+    """Every frame's detections, poses, offsets, body observation, number, time, packet and video health, in the
+    same order as track_rig gives them, in this process and in two worker processes."""
+    rig = load_rig(clip / "rig.yaml")
+    one_stats, chunk_stats = TrackStats(), TrackStats()
+    one_pass = results(track_rig(rig, packets=True, stats=one_stats))
+    assert one_pass == results(track_chunks(rig, InPlace(), packets=True, stats=chunk_stats, chunk_frames=CHUNK))
+    assert canon(one_stats.videos) == canon(chunk_stats.videos)
+    pool = LocalPool(2)
+    try:
+        assert one_pass == results(track_chunks(rig, pool, packets=True, chunk_frames=CHUNK))
+    finally:
+        pool.close()
+
+
+def rrd_rows(path: Path) -> Counter:
+    """Every logged value of a recording, read back with rerun's own reader: (entity, component, times, value) rows
+    (log time and tick, the recording's start time and the software's commit left out)."""
+    import rerun as rr
+
+    rows: Counter = Counter()
+    for chunk in rr.chunk.RrdReader(path).store().stream().to_chunks():
+        batch = chunk.to_record_batch()
+        cols = {n: batch.column(i).to_pylist() for i, n in enumerate(batch.schema.names)}
+        times = [n for n in cols if n == "capture_time" or n.startswith("frame_")]
+        values = [n for n in cols if n not in times and n not in ("log_time", "log_tick", "RecordingInfo:start_time")
+                  and not n.startswith("rerun.")]
+        for r in range(batch.num_rows):
+            t = tuple((n, cols[n][r]) for n in times)
+            for c in values:
+                value = cols[c][r]
+                if c == "TextDocument:text" and chunk.entity_path == "/archive/inputs":
+                    doc = json.loads(value[0])
+                    value = sorted((k, v) for k, v in doc.items() if k not in VOLATILE)
+                if value is not None:
+                    rows[repr((chunk.entity_path, c, t, value))] += 1
+    return rows
+
+
+def mcap_content(path: Path) -> tuple[Counter, dict]:
+    """An archive's messages (topic, log and publish time, data) and its metadata but when and by which commit."""
+    from mcap.reader import make_reader
+
+    messages: Counter = Counter()
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        for _, channel, m in reader.iter_messages(log_time_order=True):
+            messages[(channel.topic, m.log_time, m.publish_time, m.data)] += 1
+        meta = {md.name: {k: v for k, v in md.metadata.items() if k not in VOLATILE} for md in reader.iter_metadata()}
+    return messages, meta
+
+
+def track(clip: Path, out: Path, name: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([*TOPSIDE, "track", "--rig", str(clip / "rig.yaml"), "-o", str(out / f"{name}.csv"),
+                           "--rrd", str(out / f"{name}.rrd"), "--mcap", str(out / f"{name}.mcap"),
+                           "--chunk-frames", str(CHUNK), *args], capture_output=True, text=True, timeout=600)
+
+
+def test_workers_and_ray_write_the_same_outputs(clip: Path, tmp_path: Path) -> None:
+    runs = {"one": ("--workers", "1"), "two": ("--workers", "2"), "ray": ("--ray", "--workers", "2")}
+    for name, args in runs.items():
+        proc = track(clip, tmp_path, name, *args)
+        assert proc.returncode == 0, proc.stderr
+        assert "wrote" in proc.stdout
+    csv = (tmp_path / "one.csv").read_bytes()
+    assert csv.count(b"\n") > 100
+    rrd, mcap = rrd_rows(tmp_path / "one.rrd"), mcap_content(tmp_path / "one.mcap")
+    assert sum(rrd.values()) > 1000 and sum(mcap[0].values()) > 1000
+    for name in ("two", "ray"):
+        assert (tmp_path / f"{name}.csv").read_bytes() == csv, name
+        assert rrd_rows(tmp_path / f"{name}.rrd") == rrd, name
+        assert mcap_content(tmp_path / f"{name}.mcap") == mcap, name
+
+
+def test_a_workers_error_is_one_line(clip: Path, tmp_path: Path) -> None:
+    """A calibration of another image size: met in a worker, reported as one line, exit status 2, nothing written."""
+    import yaml
+
+    data = yaml.safe_load((clip / "rig.yaml").read_text())
+    cam = data["cameras"][1]
+    text = (clip / cam["calibration"]).read_text()
+    (tmp_path / "small.yaml").write_text(text.replace("image_width: 920", "image_width: 640"))
+    for c in data["cameras"]:
+        c["source"], c["calibration"] = str(clip / c["source"]), str(clip / c["calibration"])
+    cam["calibration"] = str(tmp_path / "small.yaml")
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    proc = subprocess.run([*TOPSIDE, "track", "--rig", str(tmp_path / "rig.yaml"), "-o", str(tmp_path / "o.csv"),
+                           "--workers", "2", "--chunk-frames", str(CHUNK)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "image size" in lines[0] and "Traceback" not in proc.stderr, proc.stderr
+    assert not list(tmp_path.glob("o*.csv"))
+
+
+def test_ray_missing_says_how_to_install_it(clip: Path, tmp_path: Path) -> None:
+    code = ("import sys; sys.modules['ray'] = None; from tracking.cli import main; "
+            f"sys.argv = ['topside', 'track', '--rig', {str(clip / 'rig.yaml')!r}, '-o', "
+            f"{str(tmp_path / 'o.csv')!r}, '--ray']; main()")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == ("topside: error: --ray: needs Ray, which is not installed (install it with: pip "
+                                   "install 'topside[cluster]')")
+    assert not list(tmp_path.glob("o*.csv"))
