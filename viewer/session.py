@@ -442,11 +442,15 @@ class Recorder:
         return {cone: camera for cone, (_, camera) in best.items()}
 
     def _send_layout_if_changed(self, now: float) -> None:
-        """The superintendent's layout: at once, then again when the camera that best shows a cone changes."""
+        """The superintendent's layout: at once; again at once when a cone gets its first camera (at most once per
+        cone); again when the camera that best shows a cone changes, at most every BLUEPRINT_MIN_PERIOD_S."""
         mapping = self.cone_cameras()
         first = self._blueprint_sent == -np.inf
-        if first or (mapping != self._cone_cameras and (not self._cone_cameras
-                                                         or now - self._blueprint_sent >= BLUEPRINT_MIN_PERIOD_S)):
+        # The first layout goes out with the first figures, when often one camera has measured one cone: a live
+        # replay of config2-procedure5 had cone D's camera at 0.2 s and cone A's within the next second, and cone A
+        # said "no camera yet" for the next 30 s.
+        gained = mapping.keys() - self._cone_cameras.keys()
+        if first or gained or (mapping != self._cone_cameras and now - self._blueprint_sent >= BLUEPRINT_MIN_PERIOD_S):
             self._layouts = self._layouts or [LayoutSender(APP_ID) for _ in self._streams()]
             self._show_cameras(set(mapping.values()))
             layout = superintendent_blueprint(self.rig, mapping)

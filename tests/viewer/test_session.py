@@ -224,3 +224,53 @@ def test_the_filters_cameras_are_drawn_beside_the_true_ones(archived: Archived,
         error = np.linalg.norm(estimated[-1] - true[-1])
         assert error < 0.005 * distance  # 22 mm at 20.6 m
     assert not any(p.startswith("/world/filter") for p in chunks_by_entity(recorded[0]))
+
+
+def layout_view_names(rrd: Path) -> set[str]:
+    """Display names of the views in the layout logged last into the file's blueprint (each send logs a whole layout
+    at the next step of the "blueprint" timeline)."""
+    reader = rr.chunk.RrdReader(rrd)
+    names: dict[int, set[str]] = {}  # the live layouts' store (the file's default layout is another, at step 0)
+    for store in reader.blueprints():
+        for chunk in reader.stream(store=store):
+            data = chunk.to_record_batch().to_pydict()
+            if chunk.entity_path.startswith("/view/") and "ViewBlueprint:display_name" in data:
+                for step, name in zip(data["blueprint"], data["ViewBlueprint:display_name"], strict=True):
+                    if name:
+                        names.setdefault(step, set()).add(name[0])
+    return names[max(names)]
+
+
+def test_a_cone_gets_its_image_as_soon_as_a_camera_measures_it(installation: Path, tmp_path: Path) -> None:
+    """The layout first sent names one cone's camera; another cone measured a moment later gets its image at once,
+    not after BLUEPRINT_MIN_PERIOD_S; a cone's camera changing still waits for it."""
+    from dataclasses import replace
+
+    from tracking.live import LiveUpdate
+    from tracking.pipeline import track_rig
+    from tracking.rig import load_rig
+    from viewer.session import BLUEPRINT_MIN_PERIOD_S, Recorder
+
+    rr.set_strict_mode(True)
+    rig = load_rig(installation / "rig.yaml")
+    rig = rig.model_copy(update={"cones": {"A": CONE_A, "D": [CONE_A[0], CONE_A[1] + 20.0, CONE_A[2]]}})
+    results = [r for r in track_rig(rig) if r.offsets]
+    port = [replace(r, offsets=[replace(m, cone="D") for m in r.offsets]) for r in results if r.camera == "cam-port"]
+    ahead = [r for r in results if r.camera == "cam-ahead"]
+    recorder = Recorder(rig, tmp_path / "live.rrd", layout="superintendent")
+    t0 = min(r.time for r in results)
+    recorder.on_update(LiveUpdate(now=t0, results=port[:1]))  # cone D measured by cam-port (its offsets relabelled)
+    recorder.on_update(LiveUpdate(now=t0 + 1.0, results=ahead[:1]))  # then cone A by cam-ahead, 1 s later
+    assert recorder.cone_cameras() == {"A": "cam-ahead", "D": "cam-port"}
+    recorder.flush_estimates()
+    recorder.rec.flush()
+    assert {"A: cam-ahead", "D: cam-port"} <= layout_view_names(tmp_path / "live.rrd")
+    # cam-port now measures cone A most: the layout keeps cam-ahead until BLUEPRINT_MIN_PERIOD_S has passed
+    relabelled = [replace(r, offsets=[replace(m, cone="A") for m in r.offsets]) for r in port[1:4]]
+    recorder.on_update(LiveUpdate(now=t0 + 2.0, results=relabelled))
+    assert recorder.cone_cameras()["A"] == "cam-port"
+    recorder.rec.flush()
+    assert "A: cam-ahead" in layout_view_names(tmp_path / "live.rrd")
+    recorder.on_update(LiveUpdate(now=t0 + 2.0 + BLUEPRINT_MIN_PERIOD_S))
+    recorder.close()
+    assert {"A: cam-port", "D: cam-port"} <= layout_view_names(tmp_path / "live.rrd")
