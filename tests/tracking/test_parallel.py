@@ -184,3 +184,24 @@ def test_ray_missing_says_how_to_install_it(clip: Path, tmp_path: Path) -> None:
     assert proc.stderr.strip() == ("topside: error: --ray: needs Ray, which is not installed (install it with: pip "
                                    "install 'topside[cluster]')")
     assert not list(tmp_path.glob("o*.csv"))
+
+
+def test_rain_pass_runs_where_rain_is(clip: Path, installation: Path) -> None:
+    """The second (rain-filtered) detection pass runs on frames with rain and is skipped on clear ones, where the
+    markers found are those both passes find."""
+    from tracking.detection import MarkerDetector, detections
+    from tracking.images import frames
+
+    rig = load_rig(clip / "rig.yaml")
+    rainy = next(iter(frames(rig.resolve(rig.cameras[0].source)))).gray
+    clear_rig = load_rig(installation / "rig.yaml")
+    detector = MarkerDetector(clear_rig.dictionary)
+    assert detector.rainy(rainy, detector.opening(rainy))
+    for frame in frames(clear_rig.resolve(clear_rig.cameras[0].source)):
+        opened = detector.opening(frame.gray)
+        assert not detector.rainy(frame.gray, opened)
+        quads, ids, _ = detector.find(frame.gray, opened)
+        both = detections(detector.refine(frame.gray, opened, quads)[0], ids, [])
+        found = detector.detect(frame.gray)
+        assert found.ids == both.ids and len(found.ids) >= 2
+        assert all(np.array_equal(a.corners, b.corners) for a, b in zip(found.markers, both.markers, strict=True))
