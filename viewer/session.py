@@ -171,7 +171,8 @@ class Recorder:
         self._last_time = 0.0
         self._last_capture: dict[str, float] = {}
         self._video: set[str] = set()  # cameras whose codec is declared
-        self._gop: dict[str, list[Frame]] = {}  # segmented: packets since each camera's newest keyframe
+        self._gop: dict[str, list[Frame]] = {}  # packets since each camera's newest keyframe: a new segment, and
+        # the viewer's own stream when it starts showing a camera, open with them
         self._viewer = viewer
         self._rrd = Path(rrd) if rrd is not None else None
         self._segment_s = segment_s
@@ -307,7 +308,7 @@ class Recorder:
         if result.frame.packet is not None and result.camera not in self._video:
             log_video_codec(self.rec, result.camera)
             self._video.add(result.camera)
-        if result.frame.packet is not None and self._segment_s:
+        if result.frame.packet is not None and (self._segment_s or self._view is not None):
             gop = self._gop.setdefault(result.camera, [])
             if result.frame.keyframe:
                 gop.clear()

@@ -274,3 +274,27 @@ def test_a_cone_gets_its_image_as_soon_as_a_camera_measures_it(installation: Pat
     recorder.on_update(LiveUpdate(now=t0 + 2.0 + BLUEPRINT_MIN_PERIOD_S))
     recorder.close()
     assert {"A: cam-port", "D: cam-port"} <= layout_view_names(tmp_path / "live.rrd")
+
+
+def test_the_viewers_own_stream_shows_a_camera_from_a_keyframe(installation: Path, tmp_path: Path) -> None:
+    """Unsegmented, the frames before the first layout went to the file only: the viewer's own stream began the
+    camera's video at a P-frame it could not decode until the next keyframe (250 frames later in the simulator's)."""
+    from tracking.live import LiveUpdate
+    from tracking.pipeline import track_rig
+    from tracking.rig import load_rig
+    from viewer.session import Recorder
+
+    rr.set_strict_mode(True)
+    rig = load_rig(installation / "rig.yaml")
+    results = list(track_rig(rig, packets=True))
+    recorder = Recorder(rig, None, viewer="rerun+http://127.0.0.1:1/proxy", layout="superintendent")
+    recorder._view.set_sinks(rr.FileSink(tmp_path / "view.rrd"))  # what the viewer would get, into a file
+    recorder.on_update(LiveUpdate(now=results[5].time, results=results[:6]))  # the first layout comes after these
+    recorder.on_update(LiveUpdate(now=results[-1].time, results=results[6:]))
+    recorder.close()
+    chunks = chunks_by_entity(tmp_path / "view.rrd")
+    for cam in recorder.cone_cameras().values():
+        times, keys = component_rows(chunks[f"/world/cameras/{cam}/image"], "VideoStream:is_keyframe")
+        first = np.argmin(times)
+        assert keys[first][0], cam  # its video decodes from the first sample the viewer gets
+        assert len(times) == sum(r.camera == cam for r in results)  # every frame of it, the early ones too
