@@ -387,6 +387,139 @@ def _archive_sink(rig: Rig, path: Path, options: dict[str, str], truth_df: pd.Da
 
 
 @app.command()
+def batch(
+    manifest: Annotated[Path, typer.Argument(help="YAML manifest: a list of installations, one per line: {rig: R, "
+                                                  "out: FOLDER, truth: T (optional)}.")],
+    workers: WorkersOption = None,
+    ray: RayOption = None,
+    refine: Annotated[Refinement, typer.Option(help="Corner refinement.")] = DEFAULT_REFINEMENT,
+    chunk_frames: ChunkOption = CHUNK_FRAMES_DEFAULT,
+) -> None:
+    """Re-analyse many installations: each one's offsets.csv (run.rrd with rrd: true, accuracy.md with a truth) in
+    its out folder, one progress bar over all, then a table: frames, video and wall time, accuracy, failures.
+
+    One that fails does not stop the others. Exit status: 0 when all succeeded, 1 when any failed, 2 for a bad
+    manifest."""
+    import time
+
+    from rich import box
+    from rich.table import Table
+
+    from tracking.batch import load_manifest
+    from tracking.parallel import plan_rig, runner
+    from tracking.rig import load_rig
+
+    installations = load_manifest(manifest)
+    prepared: list = []
+    for inst in installations:  # every rig read and every video's keyframes found before any work
+        try:
+            the_rig = load_rig(inst.rig)
+            prepared.append((inst, the_rig, plan_rig(the_rig, chunk_frames=chunk_frames), ""))
+        except InputError as exc:
+            prepared.append((inst, None, [], _one_line(exc)))
+    run = runner(workers, ray)
+    outcomes = []
+    started = time.perf_counter()
+    try:
+        with _progress() as progress:
+            total = sum(p.frames for *_, plans, _ in prepared for p in plans) or None
+            task = progress.add_task(f"{len(installations)} installations on {run.workers} workers", total=total)
+            for inst, the_rig, plans, error in prepared:
+                progress.update(task, description=f"{inst.label} ({len(outcomes) + 1}/{len(installations)})")
+                outcomes.append(_batch_one(inst, the_rig, plans, error, run, refine, progress, task))
+    finally:
+        run.close()
+    table = Table(title=f"{manifest}: {sum(o.ok for o in outcomes)} of {len(outcomes)} installations re-analysed in "
+                        f"{time.perf_counter() - started:.0f} s (errors against the truth in mm)", box=box.SIMPLE_HEAD,
+                  pad_edge=False, collapse_padding=True)
+    for col in ("installation", "frames", "video s", "wall s", "fps", "e_MAE x/y/z", "max mm", "result"):
+        table.add_column(col, justify="left" if col in ("installation", "result") else "right")
+    for o in outcomes:
+        mae = "/".join(f"{v:.1f}" for v in o.mae_mm) if o.mae_mm else "—"
+        table.add_row(o.name, str(o.frames), f"{o.video_s:.1f}", f"{o.wall_s:.1f}",
+                      f"{o.frames / o.wall_s:.0f}" if o.wall_s > 0 and o.frames else "—", mae,
+                      f"{o.max_mm:.0f}" if o.max_mm is not None else "—", "ok" if o.ok else "FAILED")
+    console.print(table)
+    for o in outcomes:
+        if not o.ok:
+            err_console.print(f"topside: {o.name} failed: {o.error}", markup=False)
+    if not all(o.ok for o in outcomes):
+        raise typer.Exit(1)
+
+
+def _batch_one(inst, the_rig, plans, error: str, run, refine: Refinement, progress: Progress, task):
+    """One installation of a batch: its outputs, or its one-line failure (the frames it did not track are counted
+    off the progress bar)."""
+    import time
+
+    from tracking.batch import ACCURACY_NAME, OFFSETS_NAME, RRD_NAME, Outcome
+    from tracking.evaluate import evaluate_runs, evaluation_markdown, read_offsets, read_truth
+    from tracking.outputs import write_text
+    from tracking.parallel import track_chunks
+    from tracking.pipeline import TrackStats
+    from tracking.report import OffsetsWriter
+
+    outcome = Outcome(inst.label, error=error)
+    planned = sum(p.frames for p in plans)
+    fresh = not inst.out.exists()  # a folder made here and left empty by a failure is removed
+    stats = TrackStats()
+    t0 = time.perf_counter()
+    try:
+        if error:
+            return outcome
+        csv, rrd = inst.out / OFFSETS_NAME, (inst.out / RRD_NAME) if inst.rrd else None
+        accuracy = inst.out / ACCURACY_NAME if inst.truth is not None else None
+        check_outputs({"out": csv, "rrd": rrd, "accuracy": accuracy}, [*rig_inputs(the_rig), inst.truth])
+        truth_df = read_truth(inst.truth) if inst.truth is not None else None
+        with Outputs() as outputs:
+            sinks = []
+            if rrd is not None:
+                from viewer.session import Recorder
+
+                sinks.append(Recorder(the_rig, outputs.claim(rrd), truth_df, options={"mode": inst.mode,
+                                                                                      "refine": refine.value}))
+
+            def measurements():
+                for result in track_chunks(the_rig, run, refine, packets=bool(sinks), keep_gray=bool(sinks),
+                                           stats=stats, plans=plans):
+                    stats.add(result)
+                    progress.advance(task)
+                    for sink in sinks:
+                        sink.on_frame(result)
+                    yield from result.offsets
+                    if result.observation is not None:
+                        yield result.observation
+
+            try:
+                with OffsetsWriter(outputs.claim(csv)) as writer:
+                    for e in ESTIMATORS[inst.mode](the_rig, measurements()):
+                        for sink in sinks:
+                            sink.on_estimate(e)
+                        writer.write(e)
+            finally:
+                _close_sinks(sinks)
+        outcome.rows = writer.rows
+        if truth_df is not None and accuracy is not None:
+            ev = evaluate_runs(inst.label, [(read_offsets(csv), truth_df)])
+            axes = list(ev.axes.values())
+            outcome.mae_mm = tuple(1000 * a.mae for a in axes[:3])
+            outcome.max_mm = 1000 * max(a.max_abs for a in axes[:3])
+            write_text(accuracy, evaluation_markdown(ev))
+    except InputError as exc:
+        outcome.error = _one_line(exc)
+    except Exception as exc:  # not bad input: a bug or the environment; named in one line, the others go on
+        outcome.error = _one_line(f"{type(exc).__name__}: {exc}")
+    finally:
+        outcome.frames = sum(stats.frames.values())
+        outcome.video_s = max(((v.last_s or 0.0) - (v.first_s or 0.0) for v in stats.videos.values()), default=0.0)
+        outcome.wall_s = time.perf_counter() - t0
+        progress.advance(task, max(planned - outcome.frames, 0))
+        if outcome.error and fresh and inst.out.is_dir() and not any(inst.out.iterdir()):
+            inst.out.rmdir()
+    return outcome
+
+
+@app.command()
 def export(
     recording: Annotated[Path, typer.Argument(help="A recording (.rrd) written by `topside track --rrd`.")],
     mcap: Annotated[Path, typer.Option(help="MCAP archive to write.")],
