@@ -114,6 +114,12 @@ def survey_lines(rig: Rig, fit: SurveyFit) -> list[str]:
     lines = [f"marker {s.id}: moved {np.linalg.norm(s.position_m) * 1e3:.0f} mm and "
              f"{np.degrees(np.linalg.norm(s.rotation_rad)):.2f}° from the rig, beyond the survey's tolerance: check "
              "its mounting and its entry in the rig" for s in fit.markers if s.flagged]
+    from tracking.survey import untimed_cameras
+
+    untimed = sorted(untimed_cameras(rig))
+    if untimed:
+        lines.append(f"{', '.join(untimed)}: clock not measured (topside sync): its views of the topside are left out, "
+                     "its jacket markers kept")
     if len(rig.cameras) > 1 and all(c.time_offset_sigma is None for c in rig.cameras):
         lines.append("the rig's clocks are not measured (no time_offset_sigma): a moving topside seen on clocks that "
                      "disagree moves the markers; run topside sync first")

@@ -472,6 +472,7 @@ class TopsideFilter:
         self.topside_points = {m.id: np.array(m.center) for m in markers.values() if m.body == "topside"}
         self.cones = cone_points(self.rig)
         self.survey_cov = survey_covariance(self.rig)  # cone -> (3, 3) added to its offset's covariance
+        self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}  # s, from the rig
         self.surveys = {c.name: (np.array(c.position, dtype=float), float(c.position_sigma)) for c in self.rig.cameras
                         if c.position is not None and c.position_sigma is not None}  # camera -> (position (3,), σ m)
 
@@ -813,6 +814,9 @@ class TopsideFilter:
             y = z.reshape(-1) - h - self.x[v]
             HPH = H @ self.P @ H.T
             R = sigma**2 * np.eye(8)
+            if topside and self.clock_sigma.get(cam.name):  # a clock known to σ_t: the topside seen up to σ_t early
+                moved = J[:, :6] @ self.x[6:12] * self.clock_sigma[cam.name]  # or late, (8,) px along its motion
+                R += np.outer(moved, moved)
             for j in range(4):  # robust: a corner far off (rain, glare) counts as if at the threshold
                 b = slice(2 * j, 2 * j + 2)
                 d2_j = float(y[b] @ np.linalg.solve(HPH[b, b] + R[b, b], y[b]))

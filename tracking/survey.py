@@ -11,7 +11,7 @@ footage are fitted at once to
   (the clocks must be synchronised first: `topside sync`);
 - every camera frame's pose T_camera_jacket (vessels and drones move; each frame is free);
 
-by the markers' corners (undistorted pixels, σ CORNER_NOISE_PX, soft-L1 weights against rain-struck corners), with
+by the markers' corners (undistorted pixels, σ FIT_NOISE_PX, soft-L1 weights against rain-struck corners), with
 Levenberg-Marquardt steps on the sparse normal equations.
 
 Gauge: the jacket frame is defined by its markers as surveyed, the topside frame by its own: either one marker per body
@@ -31,13 +31,30 @@ import numpy as np
 from scipy.sparse import coo_matrix, csc_matrix, diags
 from scipy.sparse.linalg import splu
 
-from tracking.clocks import ACCEL_MPS2, ANGULAR_ACCEL_RADPS2, KNOT_S, ROTATION_KNOT_S, Spline, _Model, _samples
+from tracking.clocks import (
+    ACCEL_MPS2,
+    ANGULAR_ACCEL_RADPS2,
+    KNOT_S,
+    ROTATION_KNOT_S,
+    UNKNOWN_SIGMA_S,
+    Spline,
+    _Model,
+    _samples,
+)
 from tracking.errors import InputError
 from tracking.offsets import BodyObservation, PairOffset
 from tracking.pose import Choice, marker_object_points
 from tracking.rig import Marker, Pair, Rig, SurveyCorrection, SurveySigma
 
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate, as the fusion filter takes it (tracking.fusion)
+CORRELATED_FRAMES = 15  # a view's corner errors last about this many frames (a second at 15 FPS: the sub-pixel phase
+# of a marker's edges and the stream's coding of a still picture; tracking.fusion's view biases): its frames count
+# as one in this many. Taken as independent, a minute of a camera at 40 m moved the markers it saw by 80-110 mm at a
+# stated σ of 13 mm (config2-procedure5-realities)
+FIT_NOISE_PX = CORNER_NOISE_PX * float(np.sqrt(CORRELATED_FRAMES))  # the corners' σ in the fit
+VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that lasts as long as its view (camera, marker): a bias per
+# corner coordinate and view, as tracking.fusion has it. At 34 m a 1 m marker spans 37 px: 0.08 px is 0.2 % of its
+# scale, 70 mm of its depth, which no number of frames averages away
 SOFT_L1_PX = 0.5  # corners further than this from their prediction count linearly (rain, glare)
 MAX_ITERATIONS = 40  # Levenberg-Marquardt steps
 TOLERANCE = 1e-7  # relative decrease of the cost at which it stops
@@ -45,6 +62,9 @@ DIFF_STEP = 1e-6  # rad or m: forward differences of one observation's corners
 RIDGE = 1e-9  # relative damping kept in the normal equations: a gauge no prior fixes stays finite
 DEFAULT_TOLERANCE_SIGMAS = 3.0  # without the rig's survey_tolerance, a correction beyond this many prior σ is flagged
 MIN_VIEWS = 10  # a marker seen in fewer frames keeps its survey pose
+MIN_FORESHORTENING = 0.4  # a marker seen more than 66° off its normal is left out: its corners are biased by up to a
+# pixel (config2-procedure5-realities: drone_A's 104 frames of jacket marker 0 at 77°, 16 by 73 px, moved it and its
+# neighbour 50-70 mm the wrong way)
 
 
 @dataclass(frozen=True)
@@ -128,9 +148,27 @@ def _first_pose(o: BodyObservation, near: np.ndarray | None) -> np.ndarray | Non
     return min(options, key=lambda T: float(np.linalg.norm(-T[:3, :3].T @ T[:3, 3] - near)))
 
 
+def foreshortening(corners: np.ndarray) -> float:
+    """A marker's shortest side over its longest, from its corners (4, 2): 1 face-on, cos(angle off its normal)."""
+    q = np.asarray(corners, dtype=float).reshape(4, 2)
+    sides = np.linalg.norm(q - np.roll(q, -1, axis=0), axis=1)
+    return float(sides.min() / max(sides.max(), 1e-9))
+
+
+def untimed_cameras(rig: Rig) -> set[str]:
+    """Cameras whose clock is not measured (no time_offset_sigma, or one beyond UNKNOWN_SIGMA_S) while another's is:
+    their views of the moving topside would be fitted at the wrong instants. None when no clock is measured (the
+    survey then takes the rig's clocks as they are, and says so)."""
+    measured = {c.name for c in rig.cameras if c.time_offset_sigma is not None
+                and c.time_offset_sigma <= UNKNOWN_SIGMA_S}
+    return set() if not measured else {c.name for c in rig.cameras} - measured
+
+
 def _views(rig: Rig, observations: list[BodyObservation]) -> _Views:
-    """The views of the observations with a jacket pose to start from."""
+    """The views of the observations with a jacket pose to start from; a camera of untimed_cameras gives its jacket
+    markers only."""
     index = {m.id: k for k, m in enumerate(rig.markers)}
+    untimed = untimed_cameras(rig)
     centres: dict[str, list[np.ndarray]] = {}
     for o in observations:
         if o.jacket is not None and o.jacket.choice == Choice.UNIQUE:
@@ -146,7 +184,8 @@ def _views(rig: Rig, observations: list[BodyObservation]) -> _Views:
         poses.append(T)
         cams.append(o.camera)
         for mid, z in sorted(o.corners.items()):
-            if mid not in index:
+            if mid not in index or (o.camera in untimed and rig.markers[index[mid]].body == "topside") \
+                    or foreshortening(z) < MIN_FORESHORTENING:
                 continue
             frame.append(f)
             marker.append(index[mid])
@@ -177,7 +216,11 @@ class _Bundle:
         self.o_t = 6 * nf
         self.o_w = self.o_t + 3 * trans.n
         self.o_m = self.o_w + 3 * rot.n
-        self.size = self.o_m + 6 * len(free)
+        self.o_v = self.o_m + 6 * len(free)
+        keys = [(v.frame_camera[f], int(m)) for f, m in zip(v.frame, v.marker, strict=True)]
+        views = {k: i for i, k in enumerate(dict.fromkeys(keys))}  # (camera, marker) -> its bias slot
+        self.view = np.array([views[k] for k in keys], dtype=int)  # (V,)
+        self.size = self.o_v + 8 * len(views)
         x = np.zeros(self.size)  # frames: rotation δθ and translation δt about their first pose [R0, t0]
         x[self.o_t:self.o_w] = p0.reshape(-1)
         x[self.o_w:self.o_m] = w0.reshape(-1)
@@ -200,7 +243,7 @@ class _Bundle:
         top = self.v.topside
         out[top, 6:9] = np.einsum("nk,nkj->nj", self.rw[top], W[self.ri[top]])
         out[top, 9:12] = np.einsum("nk,nkj->nj", self.tw[top], P[self.ti[top]])
-        M = x[self.o_m:].reshape(-1, 6)
+        M = x[self.o_m:self.o_v].reshape(-1, 6)
         free = self.mslot >= 0
         out[free, 12:18] = M[self.mslot[free]]
         return out
@@ -219,20 +262,20 @@ class _Bundle:
         return np.stack([u, w], axis=2).reshape(-1, 8)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
-        """(V, 8) measured minus predicted corners, px."""
-        return self.v.corners - self.project(self.local(x))
+        """(V, 8) measured minus predicted corners (each view's bias added), px."""
+        return self.v.corners - self.project(self.local(x)) - x[self.o_v:].reshape(-1, 8)[self.view]
 
     def prior_residuals(self, x: np.ndarray) -> np.ndarray:
-        """Whitened priors: marker corrections, the topside's accelerations."""
-        M = x[self.o_m:].reshape(-1, 6) / self.priors
+        """Whitened priors: marker corrections, the topside's accelerations, the views' biases."""
+        M = x[self.o_m:self.o_v].reshape(-1, 6) / self.priors
         P = x[self.o_t:self.o_w].reshape(-1, 3)
         W = x[self.o_w:self.o_m].reshape(-1, 3)
         accel = (P[2:] - 2 * P[1:-1] + P[:-2]).reshape(-1) / (self.trans.h**2 * ACCEL_MPS2)
         angular = (W[2:] - 2 * W[1:-1] + W[:-2]).reshape(-1) / (self.rot.h**2 * ANGULAR_ACCEL_RADPS2)
-        return np.concatenate([M.reshape(-1), accel, angular])
+        return np.concatenate([M.reshape(-1), accel, angular, x[self.o_v:] / VIEW_BIAS_PX])
 
     def jacobian(self, x: np.ndarray) -> csc_matrix:
-        """Sparse Jacobian of [corner residuals / CORNER_NOISE_PX, prior residuals] (signs: of the predictions)."""
+        """Sparse Jacobian of [corner residuals / FIT_NOISE_PX, prior residuals] (signs: of the predictions)."""
         q = self.local(x)
         base = self.project(q)
         D = np.empty((len(q), 8, 18))
@@ -240,7 +283,7 @@ class _Bundle:
             q1 = q.copy()
             q1[:, j] += DIFF_STEP
             D[:, :, j] = (self.project(q1) - base) / DIFF_STEP
-        D /= CORNER_NOISE_PX
+        D /= FIT_NOISE_PX
         V = len(q)
         rows8 = (8 * np.arange(V))[:, None] + np.arange(8)  # (V, 8)
         rows, cols, vals = [], [], []
@@ -261,6 +304,8 @@ class _Bundle:
                 D[top][:, :, 9:12] * self.tw[top, k][:, None, None])
         free = self.mslot >= 0
         add(free, self.o_m + 6 * self.mslot[free][:, None] + np.arange(6), D[free][:, :, 12:18])
+        bias = np.broadcast_to(np.eye(8) / FIT_NOISE_PX, (V, 8, 8))  # each view's bias adds to its predictions
+        add(every, self.o_v + 8 * self.view[:, None] + np.arange(8), bias)
         m0 = 8 * V
         nm = 6 * len(self.free)
         rows.append(m0 + np.arange(nm))
@@ -276,15 +321,20 @@ class _Bundle:
                 cols.append(offset + 3 * (j + shift) + a)
                 vals.append(np.full(k.size, value / scale))
             m1 += k.size
+        nv = self.size - self.o_v
+        rows.append(m1 + np.arange(nv))
+        cols.append(self.o_v + np.arange(nv))
+        vals.append(np.full(nv, 1.0 / VIEW_BIAS_PX))
+        m1 += nv
         return coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                           shape=(m1, self.size)).tocsc()
 
     def weighted(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-        """All residuals whitened (corners / CORNER_NOISE_PX, priors), their soft-L1 weights, and the robust cost."""
-        r = self.residuals(x) / CORNER_NOISE_PX
-        d = np.linalg.norm(r.reshape(-1, 4, 2), axis=2) * CORNER_NOISE_PX / SOFT_L1_PX  # per corner, in SOFT_L1_PX
+        """All residuals whitened (corners / FIT_NOISE_PX, priors), their soft-L1 weights, and the robust cost."""
+        r = self.residuals(x) / FIT_NOISE_PX
+        d = np.linalg.norm(r.reshape(-1, 4, 2), axis=2) * FIT_NOISE_PX / SOFT_L1_PX  # per corner, in SOFT_L1_PX
         w_corner = 1.0 / np.sqrt(1.0 + d**2)
-        cost = float(np.sum(2 * (np.sqrt(1 + d**2) - 1)) * (SOFT_L1_PX / CORNER_NOISE_PX) ** 2)
+        cost = float(np.sum(2 * (np.sqrt(1 + d**2) - 1)) * (SOFT_L1_PX / FIT_NOISE_PX) ** 2)
         prior = self.prior_residuals(x)
         cost += float(prior @ prior)
         # the model predicts; the residual is measured minus predicted: the Jacobian of the residual is -J
@@ -367,7 +417,9 @@ def survey_markers(rig: Rig, measurements: Iterable[PairOffset | BodyObservation
     if not free:
         raise InputError(rig.path, "no marker to survey (expected survey_sigma, or a sigma on each marker, and "
                                    f"markers seen in at least {MIN_VIEWS} frames)", "survey_sigma")
-    trans, rot, p0, w0 = _initial_motion(rig, offsets, float(v.time.min()), float(v.time.max()))
+    untimed = untimed_cameras(rig)
+    timed = [o for o in offsets if o.camera not in untimed]
+    trans, rot, p0, w0 = _initial_motion(rig, timed, float(v.time.min()), float(v.time.max()))
     bundle = _Bundle(rig, v, free, np.array(priors), p0, w0, trans, rot)
     x, iterations = bundle.solve()
     cov = bundle.marker_covariance(x)
