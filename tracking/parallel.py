@@ -66,7 +66,7 @@ class ChunkTask:
     packets: bool = False  # keep each frame's H.264 packet (a recording or an archive is written)
     keep_gray: bool = False  # send the pixels back (a recording of a source without H.264)
     roi_tracking: bool = False
-    threads: str = "AUTO"  # the decoder's threading: AUTO (one worker), SLICE or NONE for many
+    threads: str = "SLICE"  # the decoder's threading (SLICE: one thread for cameras' H.264): a worker is one core
 
 
 @dataclass
@@ -168,7 +168,15 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
     import cv2
 
     t0, c0 = time.perf_counter(), time.process_time()
-    cv2.setNumThreads(1)  # the workers use the cores already
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)  # a worker is one core: N workers, N cores (in place: given back after the chunk)
+    try:
+        return _run_chunk(task, t0, c0)
+    finally:
+        cv2.setNumThreads(threads)
+
+
+def _run_chunk(task: ChunkTask, t0: float, c0: float) -> ChunkResult:
     rig = _rig(task.rig_path)
     entry = next(c for c in rig.cameras if c.name == task.chunk.camera)
     tracker = CameraTracker.from_rig(rig, entry, task.refinement, packets=task.packets,
@@ -233,6 +241,11 @@ class InPlace:
         pass
 
 
+def ready(_: object = None) -> str:
+    """A worker's host:pid once it has imported the tracker (benchmarks warm the workers with it)."""
+    return f"{os.uname().nodename}:{os.getpid()}"
+
+
 def _worker_init() -> None:
     """A worker process: one thread for OpenCV, and it ends with its parent."""
     import cv2
@@ -251,6 +264,10 @@ class LocalPool:
 
     def submit(self, task: ChunkTask) -> Future:
         return self.pool.submit(run_chunk, task)
+
+    def warm(self) -> set[str]:
+        """Start every worker and import the tracker in it; the workers' host:pid."""
+        return set(self.pool.map(ready, range(4 * self.workers), chunksize=1))
 
     def wait(self, handle: Future) -> ChunkResult:
         return handle.result()
@@ -277,6 +294,11 @@ class RayRunner:
 
     def submit(self, task: ChunkTask) -> Any:
         return self.remote.remote(task)
+
+    def warm(self) -> set[str]:
+        """Start the Ray workers and import the tracker in them; their host:pid."""
+        remote = self.ray.remote(num_cpus=1)(ready)
+        return set(self.ray.get([remote.remote(k) for k in range(4 * self.workers)]))
 
     def wait(self, handle: Any) -> ChunkResult:
         return self.ray.get(handle)
@@ -399,8 +421,7 @@ def track_chunks(rig: Rig, run: Runner, refinement: Refinement = DEFAULT_REFINEM
     healths = {p.camera: replace(p.health) for p in plans}
     if stats is not None:
         stats.videos.update(healths)
-    threads = "AUTO" if run.workers == 1 else "SLICE"
-    tasks = [ChunkTask(Path(rig.path), c, refinement, packets, keep_gray, roi_tracking, threads)
+    tasks = [ChunkTask(Path(rig.path), c, refinement, packets, keep_gray, roi_tracking)
              for p in plans for c in p.chunks]
     sched = Scheduler(run, tasks, window or max(2 * run.workers, run.workers + len(plans)))
     if scheduler is not None:
