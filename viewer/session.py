@@ -62,6 +62,7 @@ from viewer.superintendent import (
     log_camera_health,
     log_cone_reading,
     log_target_circle,
+    marked_cones,
     superintendent_blueprint,
 )
 
@@ -199,7 +200,7 @@ class Recorder:
                                                                                  flush_num_bytes=BATCH_BYTES))
             self._view.set_sinks(rr.GrpcSink(viewer), default_blueprint=self._stored_blueprint())
             for cone in self.cones:
-                log_target_circle(self._view, cone)
+                log_target_circle(self._view, cone, cone in marked_cones(rig))
         if self._rrd is not None:
             self._rrd.parent.mkdir(parents=True, exist_ok=True)
             if segment_s:
@@ -252,7 +253,7 @@ class Recorder:
         log_series_styles(self.rec, self.cones, self.truth is not None, self.cameras)
         log_plot_key(self.rec, self.cones, self.cameras, self.truth is not None)
         for cone in self.cones:
-            log_target_circle(self.rec, cone)
+            log_target_circle(self.rec, cone, cone in marked_cones(self.rig))
         if self.truth is not None and len(self._segments) <= 1:
             log_truth(self.rec, self.truth, self.cones)
             log_true_cameras(self.rec, self.truth, self.cameras)

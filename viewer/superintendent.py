@@ -11,7 +11,8 @@ Entity layout:
         .../beyond                           ... with an arrow pointing the way and the distance
         .../why                              NO DATA: the reason, in the middle
     superintendent/trend/<cone>/{concentricity,bound,tolerance}   the last minute's concentricity, r + 2σ, 150 (mm)
-    superintendent/no_camera/<cone>          markdown in the image's place until a camera has measured the cone
+    superintendent/no_camera/<cone>          markdown in the image's place until a camera has measured the cone (a
+                                             cone without markers: that none will, and where its offset comes from)
     superintendent/cameras                   markdown: every camera's state, frame rate, age and markers
 The live image per cone is the 2-D view of the camera that measures that cone most.
 """
@@ -150,7 +151,21 @@ def circle(radius: float) -> np.ndarray:
     return np.c_[radius * np.cos(a), radius * np.sin(a)]
 
 
-def log_target_circle(rec: rr.RecordingStream, cone: str) -> None:
+def no_camera_text(cone: str, marked: bool) -> str:
+    """What a cone's column shows in its image's place while no camera has measured it (marked: the rig has marker
+    pairs at the cone)."""
+    if marked:
+        return f"No camera has measured cone {cone}'s markers yet: its image appears here when one does."
+    return (f"No markers at cone {cone}: no camera measures it. Its offset follows from the other cones' (the "
+            "topside is one rigid body).")
+
+
+def marked_cones(rig: Rig) -> set[str]:
+    """The cones with marker pairs in the rig."""
+    return {p.cone for p in rig.all_pairs()}
+
+
+def log_target_circle(rec: rr.RecordingStream, cone: str, marked: bool = True) -> None:
     """Static parts of a cone's bull's-eye, in mm: the ±tolerance circle and cross, the directions, the trend's
     series styles, and (until a camera measures the cone) the note in its image's place."""
     r = TOLERANCE_MM
@@ -165,9 +180,8 @@ def log_target_circle(rec: rr.RecordingStream, cone: str) -> None:
                                       ("bound", BOUND_COLOR, 1.0, "+2σ [mm]"),
                                       ("tolerance", TOLERANCE_LINE_COLOR, 1.5, f"{TOLERANCE_MM:.0f} mm")):
         rr.log(f"{trend}/{name}", rr.SeriesLines(colors=color, widths=width, names=label), static=True, recording=rec)
-    rr.log(f"{ROOT}/no_camera/{cone}", rr.TextDocument(
-        f"No camera has measured cone {cone}'s markers yet: its image appears here when one does.",
-        media_type=rr.MediaType.MARKDOWN), static=True, recording=rec)
+    rr.log(f"{ROOT}/no_camera/{cone}", rr.TextDocument(no_camera_text(cone, marked), media_type=rr.MediaType.MARKDOWN),
+           static=True, recording=rec)
 
 
 def log_cone_reading(rec: rr.RecordingStream, reading: ConeReading, now: float, stale_s: float = STALE_S) -> None:
@@ -218,11 +232,12 @@ def log_camera_health(rec: rr.RecordingStream, cameras: Mapping[str, CameraHealt
            recording=rec)
 
 
-def cone_column(cone: str, camera: str | None) -> rrb.Vertical:
+def cone_column(cone: str, camera: str | None, marked: bool = True) -> rrb.Vertical:
     """One cone's column: figures, live image (or why there is none), bull's-eye, trend; the same sizes always."""
     reach = TARGET_REACH * TOLERANCE_MM
     image = (rrb.Spatial2DView(origin=f"world/cameras/{camera}", name=f"{cone}: {camera}") if camera is not None
-             else rrb.TextDocumentView(origin=f"{ROOT}/no_camera/{cone}", name=f"{cone}: no camera yet"))
+             else rrb.TextDocumentView(origin=f"{ROOT}/no_camera/{cone}",
+                                       name=f"{cone}: no camera yet" if marked else f"{cone}: no markers"))
     return rrb.Vertical(
         rrb.TextDocumentView(origin=f"{ROOT}/cones/{cone}", name=f"cone {cone}"),
         image,
@@ -239,7 +254,8 @@ def cone_column(cone: str, camera: str | None) -> rrb.Vertical:
 def superintendent_blueprint(rig: Rig, cone_cameras: Mapping[str, str]) -> rrb.Blueprint:
     """A column per cone (figures, live image, bull's-eye, trend) above the camera table."""
     cones = sorted(rig.cones) or sorted({p.cone for p in rig.all_pairs()})
-    columns = [cone_column(cone, cone_cameras.get(cone)) for cone in cones]
+    marked = marked_cones(rig)
+    columns = [cone_column(cone, cone_cameras.get(cone), cone in marked) for cone in cones]
     return rrb.Blueprint(
         rrb.Vertical(rrb.Horizontal(*columns, name="cones"),
                      rrb.TextDocumentView(origin=f"{ROOT}/cameras", name="cameras"), row_shares=[4, 1]),

@@ -33,6 +33,8 @@ from viewer.superintendent import (
     ConeState,
     cone_reading,
     log_cone_reading,
+    log_target_circle,
+    marked_cones,
     superintendent_blueprint,
 )
 
@@ -182,6 +184,22 @@ def test_every_cone_gets_the_same_column_observed_or_not(installation: Path) -> 
     assert len(kinds) == 4 and all(len(k) == 4 for k in kinds) and len({tuple(s) for s in shares}) == 1
     assert kinds[0][1] == "Spatial2DView" and kinds[1][1] == "TextDocumentView"  # an image, or why there is none
     assert all(k[0] == "TextDocumentView" and k[2] == "Spatial2DView" and k[3] == "TimeSeriesView" for k in kinds)
+    images = [column.contents[1].name for column in blueprint.root_container.contents[0].contents]
+    assert images == ["A: cam-ahead", "B: no markers", "C: no markers", "D: no markers"]  # the rig's pairs: at A only
+    assert superintendent_blueprint(rig, {}).root_container.contents[0].contents[0].contents[1].name == \
+        "A: no camera yet"
+
+
+def test_a_cone_without_markers_says_so_in_its_images_place(installation: Path, tmp_path: Path) -> None:
+    rig = load_rig(installation / "rig.yaml").model_copy(update={"cones": CONES})
+    rec = recording(tmp_path / "notes.rrd")
+    for cone in CONES:
+        log_target_circle(rec, cone, cone in marked_cones(rig))
+    close(rec)
+    chunks = chunks_by_entity(tmp_path / "notes.rrd")
+    notes = {cone: component_rows(chunks[f"/{ROOT}/no_camera/{cone}"], "TextDocument:text")[1][0][0] for cone in CONES}
+    assert notes["A"].startswith("No camera has measured cone A's markers yet")
+    assert notes["B"].startswith("No markers at cone B: no camera measures it.")  # not "yet": none ever will
 
 
 def test_a_new_layout_clears_the_one_before(tmp_path: Path, installation: Path) -> None:
