@@ -271,6 +271,10 @@ def track(
     workers: WorkersOption = None,
     ray: RayOption = None,
     chunk_frames: ChunkOption = CHUNK_FRAMES_DEFAULT,
+    roi: Annotated[bool, typer.Option("--roi", help="Search each frame around the markers of the frames before it "
+                                                    "(the live path's detector, afresh at every chunk): about 2.4x "
+                                                    "less CPU per frame; on the demo 0.8 % fewer markers, e_MAE 1 mm "
+                                                    "larger in x and y.")] = False,
 ) -> None:
     """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording.
 
@@ -290,7 +294,7 @@ def track(
     check_outputs({"--out": out, "--rrd": rrd, "--mcap": mcap}, [*rig_inputs(the_rig), truth, key])
     truth_df = read_truth(truth) if truth else None
     private = _archive_options(key, video) if mcap is not None else None  # read before any work starts
-    options = {"mode": mode, "refine": refine.value}
+    options = {"mode": mode, "refine": refine.value, **({"roi": "on"} if roi else {})}
     stats = TrackStats()
     plans = plan_rig(the_rig, chunk_frames=chunk_frames)
     total = sum(p.frames for p in plans) or None
@@ -313,7 +317,7 @@ def track(
 
             def measurements():
                 for result in track_chunks(the_rig, run, refine, packets=bool(sinks), keep_gray=bool(sinks),
-                                           stats=stats, plans=plans):
+                                           roi_tracking=roi, stats=stats, plans=plans):
                     stats.add(result)
                     progress.advance(task)
                     _warn_lines(result.warnings)

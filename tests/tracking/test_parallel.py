@@ -92,6 +92,9 @@ def test_chunked_frames_are_one_pass_frames(clip: Path) -> None:
     pool = LocalPool(2)
     try:
         assert one_pass == results(track_chunks(rig, pool, packets=True, chunk_frames=CHUNK))
+        roi = results(track_chunks(rig, pool, roi_tracking=True, chunk_frames=CHUNK))  # a detector with state,
+        assert roi == results(track_chunks(rig, InPlace(), roi_tracking=True, chunk_frames=CHUNK))  # afresh per chunk
+        assert roi != results(track_chunks(rig, InPlace(), chunk_frames=CHUNK))
     finally:
         pool.close()
 
