@@ -66,7 +66,7 @@ def _archive_options(key: Path | None, video: str) -> Ed25519PrivateKey | None:
 EXIT_INTERRUPTED = 130  # the shell's code for a command ended by Ctrl-C
 
 # Options shared by `track` and `batch`: where the chunks of the videos are tracked.
-CHUNK_FRAMES_DEFAULT = 300  # tracking.parallel.CHUNK_FRAMES (not imported here: the CLI starts fast)
+CHUNK_FRAMES_DEFAULT = 150  # tracking.parallel.CHUNK_FRAMES (not imported here: the CLI starts fast)
 WorkersOption = Annotated[int | None, typer.Option(min=1, help="Worker processes that decode and detect (default: "
                                                              "every core; 1: in this process).")]
 RayOption = Annotated[str | None, typer.Option(metavar="[ADDRESS]", help="Run the chunks as Ray tasks: on the "

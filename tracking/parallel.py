@@ -28,8 +28,9 @@ from tracking.images import VideoHealth, decoded_frames, frames, is_image, open_
 from tracking.pipeline import CameraTracker, FrameResult, TrackStats
 from tracking.rig import CameraEntry, Rig, load_rig
 
-CHUNK_FRAMES = 300  # a chunk starts at the first keyframe this many frames or more after the previous chunk's start
-# (20 s at 15 FPS): long enough that a Ray task's overhead is amortised (benchmarks/results/scale.md)
+CHUNK_FRAMES = 150  # a chunk starts at the first keyframe this many frames or more after the previous chunk's start
+# (10 s at 15 FPS): long enough that the overhead of a chunk and of a Ray task is amortised, short enough that the
+# workers share the last chunks of a video evenly (benchmarks/results/scale.md)
 RAY_INSTALL = "pip install 'topside[cluster]'"  # what `--ray` says when Ray is not installed
 
 

@@ -208,3 +208,10 @@ def test_rain_pass_runs_where_rain_is(clip: Path, installation: Path) -> None:
         found = detector.detect(frame.gray)
         assert found.ids == both.ids and len(found.ids) >= 2
         assert all(np.array_equal(a.corners, b.corners) for a, b in zip(found.markers, both.markers, strict=True))
+
+
+def test_the_cli_default_chunk_is_the_trackers() -> None:
+    from tracking.cli import CHUNK_FRAMES_DEFAULT
+    from tracking.parallel import CHUNK_FRAMES
+
+    assert CHUNK_FRAMES_DEFAULT == CHUNK_FRAMES
