@@ -10,8 +10,10 @@ from rerun import bindings
 from tracking.rig import Rig
 from viewer.recording import TIMELINE
 
-EYE_OFFSET_M = np.array([-18.0, -44.0, 3.0])  # default 3-D eye: from ahead and starboard, under the deck (as the stern
-# cameras see the cones)
+EYE_OFFSET_M = np.array([-28.0, -62.0, 12.5])  # default 3-D eye, from the cones' centre: ahead, starboard and above,
+LOOK_OFFSET_M = np.array([8.0, -8.0, -1.0])  # looking past the centre towards the stern cameras: the whole jacket,
+# the topside above it and the cameras' frusta beside it in view (closer and lower, the demo's showed two legs and no
+# camera)
 HEALTH_SERIES = {"markers": "markers found", "reprojection_error_px": "reprojection [px]",
                  "frame_age_s": "frame age [s]"}
 AXIS_TITLES = {"dx": "Δx (to port) [m]", "dy": "Δy (astern) [m]", "dz": "Δz (up) [m]"}
@@ -81,7 +83,7 @@ def analysis_blueprint(rig: Rig, with_truth: bool) -> rrb.Blueprint:
                         name="video problems"), name="camera health")
     middle = rrb.Vertical(
         rrb.Spatial3DView(origin="world", name="installation (jacket frame)", eye_controls=rrb.EyeControls3D(
-            position=centre + EYE_OFFSET_M, look_target=centre, eye_up=[0.0, 0.0, 1.0])),
+            position=centre + EYE_OFFSET_M, look_target=centre + LOOK_OFFSET_M, eye_up=[0.0, 0.0, 1.0])),
         rrb.Horizontal(rrb.TextDocumentView(origin="status", name="status"), health),
         row_shares=[3, 2])
     return rrb.Blueprint(
