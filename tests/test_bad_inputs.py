@@ -194,6 +194,11 @@ CASES = [
     Case("live --stale nan", ["live", *RIG, "--stale", "nan"], ("--stale",)),
     Case("live over an earlier session", ["live", *RIG, "--rrd", "s.rrd", "-o", "s.csv"], ("s.csv", "earlier"),
          write("s.csv", "time,cone\n")),
+    # sync, survey
+    Case("sync -o the rig", ["sync", *RIG, "-o", "rig.yaml"], ("rig.yaml", "--out")),
+    Case("sync --reference unknown", ["sync", *RIG, "-o", "s.yaml", "--reference", "nope"], ("nope", "--reference")),
+    Case("survey --to before --from", ["survey", *RIG, "-o", "s.yaml", "--from", "4", "--to", "2"], ("--to",)),
+    Case("survey without survey_sigma", ["survey", *RIG, "-o", "s.yaml"], ("rig.yaml", "survey_sigma")),
 ]
 
 
