@@ -92,31 +92,34 @@ def track_once(rig_path: Path, run, csv: Path) -> dict:
             "workers": len({r.worker for r in done}), "csv": csv.read_bytes()}
 
 
+CONFIGS = (("1 worker (--workers 1)", InPlace), ("2 workers (--workers 2)", lambda: LocalPool(2)),
+           ("Ray local mode, 2 CPUs (--ray)", lambda: RayRunner("local", 2)),
+           ("before: one process, OpenCV's own threads", lambda: None))
+
+
 def configurations(rig_path: Path, repeats: int, work: Path) -> list[dict]:
-    """One process as before, 1 worker (in this process), 2 worker processes, Ray local mode with 2 CPUs: start-up,
-    then timed runs."""
-    out = []
-    for name, make in (("1 worker (--workers 1)", InPlace), ("2 workers (--workers 2)", lambda: LocalPool(2)),
-                       ("Ray local mode, 2 CPUs (--ray)", lambda: RayRunner("local", 2)),
-                       ("before: one process, OpenCV's own threads", lambda: None)):
-        t0 = time.perf_counter()
-        run = make()
-        if hasattr(run, "warm"):
-            run.warm()
-        startup = time.perf_counter() - t0
-        try:
-            runs = []
-            for k in range(repeats):
-                r = track_once(rig_path, run, work / f"{len(out)}-{k}.csv")
-                print(f"{name}: {r['frames'] / r['wall']:.1f} frames/s ({r['wall']:.1f} s, load "
-                      f"{r['load'][0]:.1f} -> {r['load'][1]:.1f})", flush=True)
-                runs.append(r)
-        finally:
-            if run is not None:
-                run.close()
-        best = min(runs, key=lambda r: r["wall"])
-        out.append({"name": name, "startup": startup, "runs": runs, "best": best,
-                    "median_wall": statistics.median(r["wall"] for r in runs)})
+    """1 worker (in this process), 2 worker processes, Ray local mode with 2 CPUs, and one process as before, taken
+    in turn `repeats` times (a change of the machine's load falls on all of them): start-up, then the timed run."""
+    out = [{"name": name, "startup": [], "runs": []} for name, _ in CONFIGS]
+    for k in range(repeats):
+        for (name, make), cfg in zip(CONFIGS, out, strict=True):
+            t0 = time.perf_counter()
+            run = make()
+            if hasattr(run, "warm"):
+                run.warm()
+            cfg["startup"].append(time.perf_counter() - t0)
+            try:
+                r = track_once(rig_path, run, work / f"{name[:8]}-{k}.csv")
+            finally:
+                if run is not None:
+                    run.close()
+            print(f"{name}: {r['frames'] / r['wall']:.1f} frames/s ({r['wall']:.1f} s, load {r['load'][0]:.1f} -> "
+                  f"{r['load'][1]:.1f})", flush=True)
+            cfg["runs"].append(r)
+    for cfg in out:
+        cfg["best"] = min(cfg["runs"], key=lambda r: r["wall"])
+        cfg["median_wall"] = statistics.median(r["wall"] for r in cfg["runs"])
+        cfg["startup"] = statistics.median(cfg["startup"])
     return out
 
 
@@ -289,6 +292,14 @@ def project(c_worker: float, f_main: float, overhead: float, chunk_fixed: float,
     return out
 
 
+def _autogroup() -> str:
+    """Whether the kernel groups the CPU's shares by session."""
+    try:
+        return "on" if Path("/proc/sys/kernel/sched_autogroup_enabled").read_text().strip() == "1" else "off"
+    except OSError:
+        return "unknown"
+
+
 def hours(s: float) -> str:
     return f"{s / 3600:.1f} h" if s >= 3600 else f"{s / 60:.0f} min"
 
@@ -335,13 +346,16 @@ def main() -> None:
         f"{platform.python_version()}: {args.seconds:g} s of `{SCENARIO}` at {FPS:g} FPS, {SIZE[0]}×{SIZE[1]}, "
         f"{len(plans)} cameras ({one['frames']} frames, {sum(len(p.chunks) for p in plans)} chunks of "
         f"≥ {CHUNK_FRAMES} frames starting at keyframes). Tracked in chunks and fused (fused mode, offsets CSV) as "
-        "`topside track --workers N` / `--ray` does; best of "
-        f"{args.repeats} runs each, start-up timed apart.",
+        "`topside track --workers N` / `--ray` does; each configuration run in turn, "
+        f"{args.repeats} rounds, the best and the median; start-up (median) timed apart.",
         "",
         f"**Load average (1 min) during the timed runs: {min(min(a, b) for a, b in loads):.1f} to {busiest:.1f}** "
         f"on {cores} cores (start of the benchmark {start_load:.1f}, end {end_load:.1f})"
         + (". The machine was **not quiet**: other jobs took cores, so the speed-ups below are lower than on an idle "
-           "machine." if busiest > 0.5 * cores else ": quiet."),
+           "machine. Under load they also mislead: Linux shares the CPU between sessions (autogroup "
+           f"{_autogroup()}), so two workers in the command's session may get little more of it than one, while Ray's "
+           "workers, started in a session of their own, get a share of their own."
+           if busiest > 0.5 * cores else ": quiet."),
         "",
         "| runs on | start-up s | run s (best; median) | frames/s | × 1 worker | main process CPU ms/frame | "
         "peak RSS per worker MB | same CSV as 1 worker |",
