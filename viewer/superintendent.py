@@ -111,8 +111,8 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
     if reading.age > stale_s:
         return (f"newest {reading.age:.1f} s old" if short
                 else f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)")
-    if short:
-        return f"σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm"
+    if short:  # not the limit: the reading does not say whether the warm-up's (25 mm) or the later one (50 mm) held
+        return "σ too large"
     return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_M * 1e3:.0f} mm in the first "
             f"{REPORT_WARMUP_S:g} s after the topside is placed): the cameras do not see this cone well enough")
 

@@ -13,7 +13,7 @@ from rerun.chunk import RrdReader
 
 from tracking.filtering import ConeEstimate
 from viewer.readback import chunks_by_entity, component_rows
-from viewer.superintendent import ConeState, cone_markdown, cone_reading
+from viewer.superintendent import ConeState, cone_markdown, cone_reading, no_data_reason
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +87,9 @@ def test_cone_states() -> None:
     assert cone_reading(estimate([0.12, 0.10, 0.0]), "A", 10.1, 10.05).state == ConeState.RED
     stale = cone_reading(estimate([0.0, 0.0, 0.0]), "A", 10.8, 10.2)
     assert stale.state == ConeState.NO_DATA and "NO DATA" in cone_markdown(stale)
-    assert cone_reading(estimate([np.nan] * 3), "A", 10.1, 10.05).state == ConeState.NO_DATA
+    unknown = cone_reading(estimate([np.nan] * 3), "A", 10.1, 10.05)  # the filter's σ beyond its reporting limit
+    assert unknown.state == ConeState.NO_DATA and "σ" in cone_markdown(unknown)
+    assert no_data_reason(unknown, short=True) == "σ too large"  # the ring's label: no limit that may not be in force
     assert cone_reading(None, "A", 10.1, None).state == ConeState.NO_DATA
 
 
