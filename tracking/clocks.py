@@ -308,29 +308,32 @@ def _solve(J: csr_matrix, r: np.ndarray) -> np.ndarray:
     return spsolve(A, -(J.T @ r))
 
 
-def _camera_velocity(s: _Samples, camera: int, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """One camera's topside velocity (G, 3) on a time grid (G,), from a spline through its own offsets alone, and
-    whether each grid time lies within its samples (G,)."""
+def _camera_velocity(s: _Samples, camera: int, grid: np.ndarray, position: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """One camera's topside velocity (G, 3) (or position, with its own constant bias) on a time grid (G,), from a
+    spline through its own offsets alone, and whether each grid time lies within its samples (G,)."""
     mine = np.flatnonzero(s.camera == camera)
     sub = _Samples(np.zeros(len(mine), int), s.time[mine], s.offset[mine], s.whiten[mine], s.r[mine],
                    np.unique(s.bias[mine], return_inverse=True)[1], s.axis_sigma[mine])
     model = _Model(sub, [], 0)
     x = model.linear_fit(np.zeros(model.size))
     P = x[model.o_p:model.o_w].reshape(-1, 3)
-    i, _, dw = model.p.basis(grid)
+    i, w, dw = model.p.basis(grid)
     t = s.time[mine]
     inside = (grid >= t.min()) & (grid <= t.max())
     gaps = np.diff(t) > 1.0  # a camera that lost its markers for a second says nothing in between
     for a, b in zip(t[:-1][gaps], t[1:][gaps], strict=True):
         inside &= ~((grid > a) & (grid < b))
-    return np.einsum("nk,nkj->nj", dw, P[i]), inside
+    return np.einsum("nk,nkj->nj", w if position else dw, P[i]), inside
 
 
 def first_estimates(s: _Samples, cameras: list[str], reference: int) -> dict[int, float]:
-    """Each camera's clock offset against the reference by cross-correlating their topside velocities, s; cameras
-    without overlapping motion are left out."""
+    """Each camera's clock offset against the reference by matching their topside tracks (positions from each camera's
+    own spline, their constant difference removed: a camera's biases), s; cameras without overlapping motion are left
+    out. Velocities, which differentiate each camera's noise, matched the wrong swing of a slow set-down (first
+    estimates 0.5-1.1 s off, config2-setdown-realities)."""
     grid = np.arange(s.time.min(), s.time.max(), VELOCITY_STEP_S)
-    v_ref, in_ref = _camera_velocity(s, reference, grid)
+    v_ref, in_ref = _camera_velocity(s, reference, grid, position=True)
     out = {}
     shifts = np.arange(-SEARCH_S, SEARCH_S + SEARCH_STEP_S / 2, SEARCH_STEP_S)
     for c in range(len(cameras)):
@@ -339,10 +342,10 @@ def first_estimates(s: _Samples, cameras: list[str], reference: int) -> dict[int
         sig = np.median(s.axis_sigma[s.camera == c], axis=0)
         sig_ref = np.median(s.axis_sigma[s.camera == reference], axis=0)
         weight = 1.0 / (sig**2 + sig_ref**2)
-        v_c, in_c = _camera_velocity(s, c, grid + 0.0)
+        v_c, in_c = _camera_velocity(s, c, grid, position=True)
         cost = np.full(len(shifts), np.inf)
         for k, tau in enumerate(shifts):
-            # camera c's sample at rig time t is the motion at t + τ: its velocity at t - τ lines up with the
+            # camera c's sample at rig time t is the motion at t + τ: its track at t - τ lines up with the
             # reference's at t
             u = grid - tau
             j = np.round((u - grid[0]) / VELOCITY_STEP_S).astype(int)
@@ -351,6 +354,7 @@ def first_estimates(s: _Samples, cameras: list[str], reference: int) -> dict[int
             if ok.sum() < 20:
                 continue
             d = v_c[j[ok]] - v_ref[ok]
+            d -= d.mean(axis=0)
             cost[k] = float(np.mean(d**2 @ weight))
         if not np.isfinite(cost).any():
             continue
