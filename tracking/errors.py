@@ -30,6 +30,10 @@ class InputError(Exception):
         where = f"{self.source}: {self.field}: " if self.field else f"{self.source}: "
         super().__init__(where + self.message)
 
+    def __reduce__(self) -> tuple:
+        """Pickled as its three parts (a worker process or a Ray task raises it, the command reports it)."""
+        return type(self), (self.source, self.message, self.field)
+
 
 def looks_binary(data: bytes, final: bool = True) -> bool:
     """True when data holds a NUL byte or is not UTF-8 (final=False: data may end inside a character)."""

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
+from tracking.camera import load_camera
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
 from tracking.images import VideoHealth, decoded_frames, frames, is_image, open_video
@@ -402,6 +403,8 @@ def plan_rig(rig: Rig, cameras: list[str] | None = None, chunk_frames: int = CHU
     entries = [c for c in rig.cameras if cameras is None or c.name in cameras]
     if not entries:
         raise InputError(rig.path, "no cameras to track (expected at least one)", "cameras")
+    for e in entries:  # what the workers read, checked here before any work, in track_rig's order
+        load_camera(rig.resolve(e.calibration))
     for e in entries:
         src = source_path(rig, e)
         if not isinstance(src, str) and not Path(src).is_file():
@@ -422,7 +425,7 @@ def track_chunks(rig: Rig, run: Runner, refinement: Refinement = DEFAULT_REFINEM
     healths = {p.camera: replace(p.health) for p in plans}
     if stats is not None:
         stats.videos.update(healths)
-    tasks = [ChunkTask(Path(rig.path), c, refinement, packets, keep_gray, roi_tracking)
+    tasks = [ChunkTask(Path(rig.path).resolve(), c, refinement, packets, keep_gray, roi_tracking)  # any node, any cwd
              for p in plans for c in p.chunks]
     sched = Scheduler(run, tasks, window or max(2 * run.workers, run.workers + len(plans)))
     if scheduler is not None:

@@ -215,3 +215,14 @@ def test_the_cli_default_chunk_is_the_trackers() -> None:
     from tracking.parallel import CHUNK_FRAMES
 
     assert CHUNK_FRAMES_DEFAULT == CHUNK_FRAMES
+
+
+def test_input_errors_cross_processes() -> None:
+    """An InputError raised in a worker process or a Ray task arrives whole (pickled as its three parts)."""
+    import pickle
+
+    from tracking.errors import InputError
+
+    for err in (InputError("rig.yaml", "bad (expected good)", "cameras[0].source"), InputError("a.mp4", "damaged")):
+        back = pickle.loads(pickle.dumps(err))
+        assert (back.source, back.message, back.field, str(back)) == (err.source, err.message, err.field, str(err))
