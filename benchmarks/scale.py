@@ -20,7 +20,6 @@ import math
 import os
 import pickle
 import platform
-import resource
 import statistics
 import tempfile
 import time
@@ -40,6 +39,7 @@ from tracking.parallel import (
     InPlace,
     LocalPool,
     RayRunner,
+    peak_rss_mb,
     plan_rig,
     run_chunk,
     track_chunks,
@@ -87,8 +87,7 @@ def track_once(rig_path: Path, run, csv: Path) -> dict:
     return {"wall": wall, "main_cpu": cpu, "frames": sum(stats.frames.values()),
             "markers": sum(stats.markers.values()), "load": (before, load()), "chunks": len(done),
             "worker_cpu": sum(r.cpu_seconds for r in done) if done else cpu,
-            "worker_rss": max((r.max_rss_mb for r in done),
-                              default=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
+            "worker_rss": max((r.max_rss_mb for r in done), default=peak_rss_mb()),
             "workers": len({r.worker for r in done}), "csv": csv.read_bytes()}
 
 
@@ -276,19 +275,20 @@ def profile_top(rig_path: Path, lines: int = 16) -> list[str]:
 
 
 def project(c_worker: float, f_main: float, overhead: float, chunk_fixed: float, chunk: int, efficiency: float
-            ) -> list[tuple[str, int, int, float, str]]:
-    """Wall time of one installation and of INSTALLATIONS on 1, 8, 64 nodes: (what, nodes, cores, s, bound by)."""
+            ) -> list[tuple[str, int, int, int, float, str]]:
+    """Wall time of one installation and of INSTALLATIONS on 1, 8, 64 nodes: (what, nodes, cores, installations
+    fused at once, s, bound by)."""
     frames = HOURS * 3600 * FPS * CAMERAS
     per_frame = c_worker * (1 + (overhead + chunk_fixed) / (chunk * c_worker)) / efficiency  # core-seconds per frame
     out = []
     for what, installs in (("one installation", 1), (f"{INSTALLATIONS} installations", INSTALLATIONS)):
         for nodes in NODES:
             cores = nodes * CORES_PER_NODE
-            drivers = min(installs, nodes)  # one fusing driver per node at a time, each on a core of its own
-            compute = installs * frames * per_frame / max(cores - drivers, 1)
+            drivers = min(installs, math.ceil(cores * f_main / (per_frame + f_main)))  # the drivers' share of the cores
+            compute = installs * frames * (per_frame + f_main) / cores
             driver = math.ceil(installs / drivers) * frames * f_main
             bound = "fusion on the driver" if driver > compute else "tracking on the workers"
-            out.append((what, nodes, cores, max(compute, driver), bound))
+            out.append((what, nodes, cores, drivers, max(compute, driver), bound))
     return out
 
 
@@ -350,12 +350,13 @@ def main() -> None:
         f"{args.repeats} rounds, the best and the median; start-up (median) timed apart.",
         "",
         f"**Load average (1 min) during the timed runs: {min(min(a, b) for a, b in loads):.1f} to {busiest:.1f}** "
-        f"on {cores} cores (start of the benchmark {start_load:.1f}, end {end_load:.1f})"
+        f"on {cores} cores, this benchmark's own busy processes (1 to 3) included (start of the benchmark "
+        f"{start_load:.1f}, end {end_load:.1f})"
         + (". The machine was **not quiet**: other jobs took cores, so the speed-ups below are lower than on an idle "
            "machine. Under load they also mislead: Linux shares the CPU between sessions (autogroup "
            f"{_autogroup()}), so two workers in the command's session may get little more of it than one, while Ray's "
            "workers, started in a session of their own, get a share of their own."
-           if busiest > 0.5 * cores else ": quiet."),
+           if busiest > cores + 0.5 else ": quiet (no more than its own processes)."),
         "",
         "| runs on | start-up s | run s (best; median) | frames/s | × 1 worker | main process CPU ms/frame | "
         "peak RSS per worker MB | same CSV as 1 worker |",
@@ -444,24 +445,27 @@ def main() -> None:
         f"{CHUNK_FRAMES} frames Ray's {1000 * overhead['per_task']:.1f} ms and the chunk's {1000 * fixed:.0f} ms, "
         f"divided by the parallel efficiency measured here with 2 workers ({speedup2 / 2:.2f}). Fusion is "
         f"sequential: one driver per installation spends f = {1000 * f_main:.2f} ms per frame "
-        "(the main process's CPU with 2 workers: merging, receiving results, fusion, CSV). An installation's wall "
-        "time is the larger of its compute (frames × c / worker cores) and its driver's time (frames × f). 100 "
-        "installations run one driver per node at a time (each taking a core from the workers). Assumed: videos "
-        "on storage every node reads at the needed rate (8 cameras at 1.6 Mbit/s: 13 Mbit/s per installation "
-        "in real time, ×10⁴ flat out on 1024 cores is ~1.7 GB/s), nodes as fast as this machine's cores, "
-        "results sent to the driver as fast as measured here, no failures or stragglers.",
+        "(the main process's CPU with 2 workers: merging, receiving results, fusion, CSV). Installations are fused "
+        "D at a time, D = ⌈cores × f / (c + f)⌉ (the drivers' share of the cores), each on a core of its own. Wall "
+        "time = the larger of all the CPU over all the cores (installations × frames × (c + f) / cores) and the "
+        "drivers' time (⌈installations / D⌉ × frames × f). Assumed: videos on storage every node reads at the "
+        "needed rate (8 cameras at 1.6 Mbit/s: 13 Mbit/s per installation in real time; flat out a core reads "
+        "~1 MB/s, 1024 cores ~1 GB/s), nodes as fast as this machine's cores, results sent to the drivers as fast "
+        "as measured here (0.85 MB per 160-frame chunk), no failures or stragglers; memory per node: a worker per "
+        "core at the peak RSS above, and D drivers.",
         "",
-        "| what | nodes × 16 cores | wall time | bound by |",
-        "|---|---:|---:|---|",
+        "| what | nodes × 16 cores | fused at once (D) | wall time | bound by |",
+        "|---|---:|---:|---:|---|",
     ]
-    for what, nodes, ncores, seconds, bound in project(c_worker, f_main, overhead["per_task"], fixed, CHUNK_FRAMES,
-                                                       speedup2 / 2):
-        lines.append(f"| {what} | {nodes} ({ncores} cores) | {hours(seconds)} | {bound} |")
+    rows = project(c_worker, f_main, overhead["per_task"], fixed, CHUNK_FRAMES, speedup2 / 2)
+    for what, nodes, ncores, drivers, seconds, bound in rows:
+        lines.append(f"| {what} | {nodes} ({ncores} cores) | {drivers} | {hours(seconds)} | {bound} |")
+    single = HOURS * 3600 * FPS * CAMERAS * f_main
     lines += [
         "",
-        f"One installation is bound by its fusion from 8 nodes on: {hours(HOURS * 3600 * FPS * CAMERAS * f_main)} "
-        "however many cores track its chunks. The filter applies every measurement in capture-time order, so a "
-        "faster single installation needs a cheaper filter step or fewer measurements fused, not more nodes; "
+        f"One installation cannot take less than its fusion, {hours(single)} ({1 / f_main:.0f} frames/s on one "
+        "core), however many cores track its chunks: the filter applies every measurement in capture-time order. "
+        "A faster single installation needs a cheaper filter step (or fewer measurements fused), not more nodes; "
         "a campaign of many installations scales with the nodes.",
     ]
     write_results("scale", lines, echo=True)

@@ -179,15 +179,16 @@ def run_chunk(task: ChunkTask) -> ChunkResult:
 
 
 def _run_chunk(task: ChunkTask, t0: float, c0: float) -> ChunkResult:
-    rig = _rig(task.rig_path)
-    entry = next(c for c in rig.cameras if c.name == task.chunk.camera)
-    tracker = CameraTracker.from_rig(rig, entry, task.refinement, packets=task.packets,
-                                     roi_tracking=task.roi_tracking)
     out = ChunkResult(task.chunk)
     log = StampLog()
-    src = source_path(rig, entry)
     chunk = task.chunk
-    try:
+    src: Path | str = ""
+    try:  # bad input comes back as data: Ray would wrap the exception in its own, with a traceback in its text
+        rig = _rig(task.rig_path)
+        entry = next(c for c in rig.cameras if c.name == task.chunk.camera)
+        tracker = CameraTracker.from_rig(rig, entry, task.refinement, packets=task.packets,
+                                         roi_tracking=task.roi_tracking)
+        src = source_path(rig, entry)
         if chunk.start_pts is None and chunk.packets is None:  # the whole video (or image, or stream) in one
             source = frames(src, entry.time_offset, packets=task.packets, health=log)
         else:
@@ -203,13 +204,25 @@ def _run_chunk(task: ChunkTask, t0: float, c0: float) -> ChunkResult:
     except InputError as exc:
         out.error = (exc.source, exc.message, exc.field)
     out.stamps = log.stamps
-    out.still = is_image(src)
+    out.still = bool(src) and is_image(src)
     out.packets_read = log.packets
     out.seconds = time.perf_counter() - t0
     out.cpu_seconds = time.process_time() - c0
-    out.max_rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    out.max_rss_mb = peak_rss_mb()
     out.worker = f"{os.uname().nodename}:{os.getpid()}"
     return out
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory, MB: VmHWM (its own, since it was started), else getrusage's (which a
+    spawned worker inherits from the process it was forked from)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def _closing(container: Any, items: Iterator[Any]) -> Iterator[Any]:
