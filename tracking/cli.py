@@ -1024,6 +1024,24 @@ def _print_check(report: CheckReport) -> None:
     if others:
         parts.append(f"{others} other finding{'' if others == 1 else 's'} above")
     console.print(f"NOT READY: {'; '.join(parts)}")
+    for line in _check_next_steps(report):
+        console.print(f"next: {line}")
+
+
+def _check_next_steps(report: CheckReport) -> list[str]:
+    """What to run after a check that found clocks or markers off (issue 22's sync and survey)."""
+    from tracking.rig import WARN_CLOCK_SIGMA_S
+
+    rig = report.rig
+    out = []
+    if any(c.clock.problems for c in report.cameras) or any(
+            (c.time_offset_sigma or 0.0) > WARN_CLOCK_SIGMA_S for c in rig.cameras):
+        out.append(f"measure the cameras' clock offsets from footage: topside sync --rig {rig.path} -o synced.yaml")
+    if report.disagreements:
+        out.append("correct the rig where a marker was entered wrongly (id, face, centre); for centimetres and "
+                   f"degrees, refine the markers from footage before the lift: topside survey --rig {rig.path} "
+                   "-o surveyed.yaml")
+    return out
 
 
 def _check_recording(report: CheckReport, path: Path) -> None:

@@ -245,6 +245,9 @@ def test_the_command_flags_a_wrong_face_and_records_the_installation(clip: Path,
     assert "disagrees: drone_D2: its jacket markers [6] and topside markers [7] put the topside" in out
     assert "marker 7 (topside D/port)" in out and "NOT READY" in out and "markers 6, 7 disagree" in out
     assert "cone A: ready: seen by drone_A, stern_A" in out
+    assert "next: correct the rig where a marker was entered wrongly" in out
+    assert f"topside survey --rig {rig} -o surveyed.yaml" in out
+    assert "topside sync" not in out  # the clip's clocks keep their rate and the rig states none uncertain
     assert f"wrote {rrd}" in out
 
     from viewer.readback import chunks_by_entity
