@@ -6,10 +6,14 @@ Independent of the tracker and of the simulator. Pixel centres are at integer co
 
 from __future__ import annotations
 
+import fcntl
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 from tracking.sim.transforms import T_to_pose
 
@@ -207,3 +211,18 @@ def render_installation(folder, motion, times: dict[str, np.ndarray], dist: np.n
     lines = [",".join(header)] + [f"{t:.4f},{a:.6f},{b:.6f},{c:.6f}{still}"
                                   for t, (a, b, c) in zip(t_all, truth, strict=True)]
     (folder / "truth.csv").write_text("\n".join(lines) + "\n")
+
+
+def simulated_once(tmp_path_factory: pytest.TempPathFactory, scenario: str, duration: float) -> Path:
+    """A simulated clip, rendered once per test run even when xdist's workers share it: under a lock in the run's
+    common temporary folder."""
+    from tracking.sim.command import run_simulate
+
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    folder = shared / f"sim-{scenario}-{duration:g}s"
+    with open(shared / f"sim-{scenario}-{duration:g}s.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (folder / "scenario.yaml").is_file():
+            run_simulate(scenario, folder, duration=duration, quiet=True)
+    return folder

@@ -75,6 +75,12 @@ class LiveUpdate:
     cameras: dict[str, CameraHealth] = field(default_factory=dict)
     last_measurement: float | None = None  # capture time of the newest measurement the filter accepted
 
+    def in_capture_order(self) -> list[FrameResult | ConeEstimate]:
+        """Frames and estimates by capture time, each frame before the estimates of its time."""
+        order = sorted([(r.time, 0, k) for k, r in enumerate(self.results)]
+                       + [(e.time, 1, k) for k, e in enumerate(self.estimates)])
+        return [self.results[k] if kind == 0 else self.estimates[k] for _, kind, k in order]
+
 
 def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: mp.Value, origin: mp.Value,
                   speed: float, refinement: Refinement, realtime: bool, loop_until: float | None = None,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -57,36 +57,33 @@ def check_writable(path: Path, option: str) -> None:
         raise InputError(path, f"cannot be written: no permission to write in {existing}", option)
 
 
-def partial_path(path: Path) -> Path:
-    """A new, empty temporary file beside path, claimed atomically: <stem>.partial<suffix> or <stem>.partial-N."""
+def _claim_beside(path: Path, name: str, suffix: str, claim: Callable[[Path], None], what: str) -> Path:
+    """The first of <name>.partial<suffix>, <name>.partial-2<suffix>, ... beside path that claim creates anew."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     for n in range(1, MAX_PARTIALS):
-        candidate = path.with_name(f"{path.stem}{PARTIAL}{'' if n == 1 else f'-{n}'}{path.suffix}")
+        candidate = path.with_name(f"{name}{PARTIAL}{'' if n == 1 else f'-{n}'}{suffix}")
         try:
-            os.close(os.open(candidate, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644))
+            claim(candidate)
         except FileExistsError:
             continue
         except OSError as exc:
             raise InputError(path, f"cannot be written ({exc.strerror})") from None
         return candidate
-    raise InputError(path, f"cannot be written: {MAX_PARTIALS} temporary files beside it already")
+    raise InputError(path, f"cannot be written: {MAX_PARTIALS} temporary {what} beside it already")
+
+
+def partial_path(path: Path) -> Path:
+    """A new, empty temporary file beside path, claimed atomically: <stem>.partial<suffix> or <stem>.partial-N."""
+    path = Path(path)
+    return _claim_beside(path, path.stem, path.suffix,
+                         lambda p: os.close(os.open(p, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)), "files")
 
 
 def partial_dir(path: Path) -> Path:
     """A new, empty temporary folder beside path: <name>.partial or <name>.partial-N."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    for n in range(1, MAX_PARTIALS):
-        candidate = path.with_name(f"{path.name}{PARTIAL}{'' if n == 1 else f'-{n}'}")
-        try:
-            candidate.mkdir()
-        except FileExistsError:
-            continue
-        except OSError as exc:
-            raise InputError(path, f"cannot be written ({exc.strerror})") from None
-        return candidate
-    raise InputError(path, f"cannot be written: {MAX_PARTIALS} temporary folders beside it already")
+    return _claim_beside(path, path.name, "", Path.mkdir, "folders")
 
 
 def replace_dir(partial: Path, path: Path) -> Path:

@@ -120,13 +120,11 @@ class FoxgloveStream:
 
     def on_update(self, update: LiveUpdate) -> None:
         """A live update's frames and estimates, in capture-time order."""
-        order = sorted([(r.time, 0, k) for k, r in enumerate(update.results)]
-                       + [(e.time, 1, k) for k, e in enumerate(update.estimates)])
-        for _, kind, k in order:
-            if kind == 0:
-                self.on_frame(update.results[k])
+        for item in update.in_capture_order():
+            if isinstance(item, ConeEstimate):
+                self.on_estimate(item)
             else:
-                self.on_estimate(update.estimates[k])
+                self.on_frame(item)
 
     def close(self) -> None:
         """The archive's closing messages, then the server stops (its clients are disconnected)."""

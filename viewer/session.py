@@ -390,13 +390,11 @@ class Recorder:
     def on_update(self, update: LiveUpdate) -> None:
         """Log a live update: its frames and estimates in capture-time order (each frame before the estimates it
         gave, so both land in the segment that spans their time), then the superintendent's figures."""
-        order = sorted([(r.time, 0, k) for k, r in enumerate(update.results)]
-                       + [(e.time, 1, k) for k, e in enumerate(update.estimates)])
-        for _, kind, k in order:
-            if kind == 0:
-                self.on_frame(update.results[k])
+        for item in update.in_capture_order():
+            if isinstance(item, ConeEstimate):
+                self.on_estimate(item)
             else:
-                self.on_estimate(update.estimates[k])
+                self.on_frame(item)
         self._last_update = update
         self._compactor.poll()
         if update.now - self._board_logged >= BOARD_PERIOD_S:

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import fcntl
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -16,6 +14,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from tests.synthetic import simulated_once
 from tracking.check import CameraRun, CheckReport, camera_clock, check_runs, run_cameras
 from tracking.images import VideoHealth
 from tracking.pipeline import CameraTracker
@@ -29,18 +28,8 @@ TOPSIDE = [sys.executable, "-m", "tracking.cli"]
 
 @pytest.fixture(scope="session")
 def clip(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One simulated clip for every test here, rendered once even when xdist's workers share the session: under a
-    lock in the run's common temporary folder."""
-    from tracking.sim.command import run_simulate
-
-    base = tmp_path_factory.getbasetemp()
-    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    folder = shared / f"check-{SCENARIO}"
-    with open(shared / f"check-{SCENARIO}.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (folder / "scenario.yaml").is_file():
-            run_simulate(SCENARIO, folder, duration=DURATION_S, quiet=True)
-    return folder
+    """Every test here shares one simulated clip."""
+    return simulated_once(tmp_path_factory, SCENARIO, DURATION_S)
 
 
 @pytest.fixture(scope="module")

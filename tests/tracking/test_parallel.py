@@ -5,9 +5,7 @@ line."""
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import json
-import os
 import subprocess
 import sys
 from collections import Counter
@@ -16,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.synthetic import simulated_once
 from tracking.images import VideoHealth
 from tracking.parallel import InPlace, LocalPool, plan_rig, track_chunks
 from tracking.pipeline import TrackStats, track_rig
@@ -30,17 +29,8 @@ VOLATILE = ("software_commit", "written_utc")  # which software and when it wrot
 
 @pytest.fixture(scope="session")
 def clip(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One simulated clip, rendered once even when xdist's workers share the session."""
-    from tracking.sim.command import run_simulate
-
-    base = tmp_path_factory.getbasetemp()
-    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    folder = shared / f"parallel-{SCENARIO}"
-    with open(shared / f"parallel-{SCENARIO}.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (folder / "scenario.yaml").is_file():
-            run_simulate(SCENARIO, folder, duration=DURATION_S, quiet=True)
-    return folder
+    """Every test here shares one simulated clip."""
+    return simulated_once(tmp_path_factory, SCENARIO, DURATION_S)
 
 
 def canon(o: object) -> object:
