@@ -26,6 +26,12 @@ per corner coordinate, which renew as the marker's image moves (VIEW_BIAS_RENEW_
 still jacket marker then tells the filter its pose to the bias's σ, however long it looks, instead of averaging
 a fixed error away as if it were noise (which left a still camera's swing 7σ off, and an offset 48 mm off).
 
+What the rig states but footage is not trusted to tell widens σ rather than hiding in it. Each marker's survey
+error (survey_sigma) is a consider state (ConsiderStates): never estimated, its prior kept, its cross-covariance
+carried, so a marker's error stays in σ however many frames see it. A camera's clock σ (time_offset_sigma) widens
+its topside corners' noise by their motion over it, and every estimate's σ by the topside's motion over the largest
+clock σ of the cameras it rests on (clock_bound).
+
 Measurements are applied at their capture times (cameras need no synchronisation), and the offset
 at every cone follows from the topside pose, including cones no camera sees. Corners far off are
 down-weighted (Huber-like), markers and pair offsets gated by their Mahalanobis distance. Offline,
@@ -63,9 +69,6 @@ REPORT_WARMUP_SIGMA_M = 0.025  # this: the first seconds' camera poses are poorl
 SMOOTHER_SPAN_S = 30.0  # recorded runs are smoothed this much at a time, each time with SMOOTHER_LAG_S of the
 SMOOTHER_LAG_S = 45.0  # future after it: memory holds both, not the whole run; a still camera gains from the far future
 JACOBIAN_STEP = 1e-6  # rad or m, numeric Jacobians of the body measurements
-PAIR_POSITION_SIGMA_M = 0.01  # how the filter weighs a pair's topside position against its rotation, for carrying
-PAIR_ROTATION_SIGMA_RAD = 0.01  # survey errors to the cones (survey_covariance): a marker's rotation as well known as
-# its position over 1 m (a 1 m marker at 20-40 m: its position to a centimetre or so, its rotation to half a degree)
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame (edge-fit corners in fog and rain: 0.1 px median)
 VIEW = 8  # bias states per view (camera, marker): one per corner coordinate
 VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that stays while its marker's image stays
@@ -162,10 +165,11 @@ def _body_columns(M: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
 
 @dataclass(frozen=True)
 class Transition:
-    """One prediction of the state (n,): bodies first (12 each), then view biases.
+    """One prediction of the state (n,): bodies first (12 each), then consider states and view biases.
 
     Per body, its rates' decay a (B, 6), their weight b (B, 6) on the pose and its process noise (B, 12, 12); per
-    view-bias state, the share of it that stays (V,), the rest renewed with VIEW_BIAS_PX.
+    state after the bodies, the share of it that stays (V,), the rest renewed with VIEW_BIAS_PX (consider states:
+    all of it stays).
     """
 
     a: np.ndarray
@@ -397,44 +401,32 @@ def cone_points(rig: Rig) -> dict[str, np.ndarray]:
     return points
 
 
-def survey_covariance(rig: Rig) -> dict[str, np.ndarray]:
-    """(3, 3) covariance, per cone, that the markers' survey errors (rig.marker_sigma) add to its offset: errors the
-    footage cannot average away, since they do not change while the markers stay.
+@dataclass(frozen=True)
+class ConsiderStates:
+    """The markers' survey errors, which the rig states (survey_sigma) but footage is not trusted to measure, carried
+    as consider (Schmidt) states: each marker's rotation δθ and centre δp in its body's frame. They sit in the state
+    after the bodies with their prior covariance, which no update changes, and stay zero; the updates carry their
+    cross-covariances, so a cone's σ holds them as the geometry passes them on (a survey error stays while the markers
+    stay: averaging frames does not shrink it)."""
 
-    Each pair places the topside through its two markers: a jacket marker off by (δθ_W, δp_W) turns and shifts the
-    view about it (a camera placed by a tilted marker is tilted with it), a topside marker off by (δθ_S, δp_S) does
-    the same to the topside, so the pair puts its topside marker's centre c_S off by δp_W - δp_S + δθ_W × (c_S - c_W)
-    and the topside's rotation off by δθ_W - δθ_S. The filter weighs the pairs' positions and rotations as the corners
-    tell them (PAIR_POSITION_SIGMA_M against PAIR_ROTATION_SIGMA_RAD: pairs at cones 20 m apart fix the rotation by
-    their positions, two pairs at one cone partly by their markers' orientations); that fit carries the survey errors
-    to every cone. Zero without a survey σ."""
-    markers = rig.marker_by_id
-    weight = np.diag([PAIR_POSITION_SIGMA_M**-2] * 3 + [PAIR_ROTATION_SIGMA_RAD**-2] * 3)
-    info, spread = np.zeros((6, 6)), np.zeros((6, 6))
-    for pair in rig.all_pairs():
-        W, S = markers[pair.jacket], markers[pair.topside]
-        c_w, c_s = np.array(W.center, dtype=float), np.array(S.center, dtype=float)
-        J = np.zeros((6, 12))  # (error at c_S, rotation error) by (δθ_W, δp_W, δθ_S, δp_S)
-        J[:3, :3] = -skew(c_s - c_w)
-        J[:3, 3:6] = np.eye(3)
-        J[3:, :3] = np.eye(3)
-        J[:3, 9:12] = -np.eye(3)
-        J[3:, 6:9] = -np.eye(3)
-        variances = np.zeros(12)
-        for k, marker in enumerate((W, S)):
+    markers: dict[int, int]  # marker id -> index of its (δθ, δp) (6,)
+    prior: np.ndarray  # (C,) variances, in index order from the first
+    first: int  # index of the first
+
+    @classmethod
+    def of(cls, rig: Rig, first: int) -> ConsiderStates:
+        """The rig's survey σ of its markers that are not references, from index first."""
+        markers, prior = {}, []
+        for marker in rig.markers:
             sigma = rig.marker_sigma(marker)
-            if sigma is not None:
-                variances[6 * k:6 * k + 6] = np.concatenate([sigma.tilt_rad(), sigma.position()]) ** 2
-        G = np.eye(6)  # (offset at c_S, rotation) of the topside pose (t, ω): o = t - [c_S]× ω
-        G[:3, 3:] = -skew(c_s)
-        info += G.T @ weight @ G
-        spread += G.T @ weight @ J @ np.diag(variances) @ J.T @ weight @ G
-    if not spread.any():
-        return {}
-    M = np.linalg.inv(info)
-    pose = M @ spread @ M.T
-    return {cone: point_offset_matrix(r)[:, :6] @ pose @ point_offset_matrix(r)[:, :6].T
-            for cone, r in cone_points(rig).items()}
+            if sigma is not None and (sigma.tilt_rad().any() or sigma.position().any()):
+                markers[marker.id] = first + len(prior)
+                prior.extend(np.concatenate([sigma.tilt_rad(), sigma.position()]) ** 2)
+        return cls(markers, np.array(prior), first)
+
+    @property
+    def indices(self) -> slice:
+        return slice(self.first, self.first + self.prior.size)
 
 
 @dataclass
@@ -455,11 +447,14 @@ class TopsideFilter:
     def __post_init__(self) -> None:
         self.cameras = {c.name: CameraState(STATE * (1 + k), c.mount, c.name) for k, c in enumerate(self.rig.cameras)}
         self.body_size = STATE * (1 + len(self.cameras))
+        self.consider = ConsiderStates.of(self.rig, self.body_size)  # after the bodies; view biases after them
         self.views: dict[tuple[str, int], ViewBias] = {}  # (camera, marker) -> its bias states, from its first corners
-        self.x = np.zeros(self.body_size) if self.x is None else self.x
+        n = self.consider.indices.stop
+        self.x = np.zeros(n) if self.x is None else self.x
         if self.P is None:
-            self.P = np.zeros((self.body_size, self.body_size))
+            self.P = np.zeros((n, n))
             self.P[:STATE, :STATE] = prior_covariance(self.tuning)
+            self.P[self.consider.indices, self.consider.indices] = np.diag(self.consider.prior)
             for cam in self.cameras.values():
                 self._reset_camera(cam)
         self.topside_placed = False
@@ -470,8 +465,8 @@ class TopsideFilter:
                                 for i, T in geometry.topside.items()}
         markers = self.rig.marker_by_id
         self.topside_points = {m.id: np.array(m.center) for m in markers.values() if m.body == "topside"}
+        self.centres = {m.id: np.array(m.center, dtype=float) for m in markers.values()}
         self.cones = cone_points(self.rig)
-        self.survey_cov = survey_covariance(self.rig)  # cone -> (3, 3) added to its offset's covariance
         self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}  # s, from the rig
         self.surveys = {c.name: (np.array(c.position, dtype=float), float(c.position_sigma)) for c in self.rig.cameras
                         if c.position is not None and c.position_sigma is not None}  # camera -> (position (3,), σ m)
@@ -628,8 +623,11 @@ class TopsideFilter:
         PHt = self.P @ H.T  # (n, M): O(n² M), where the Joseph form would cost O(n³) for n = 12 per body
         S = H @ PHt + R
         K = np.linalg.solve(S, PHt.T).T
-        self.x = self.x + K @ y
         P = self.P - K @ PHt.T
+        c = self.consider.indices  # consider states are not estimated (Schmidt): the others' update, their covariance
+        K[c] = 0.0  # and cross-covariance are as with them, their own is kept
+        P[c, c] = self.P[c, c]
+        self.x = self.x + K @ y
         self.P = (P + P.T) / 2  # stays symmetric
 
     def _best(self, candidates: list[tuple[np.ndarray, np.ndarray]], H: np.ndarray, gain: float,
@@ -669,6 +667,7 @@ class TopsideFilter:
             return False  # never start from a pose IPPE could not settle: nothing could gate it
         H = np.zeros((3, self.size))
         H[:, :STATE] = point_offset_matrix(self.topside_points[m.topside_id])
+        self._pair_consider(H, m)
         gain = AMBIGUOUS_VARIANCE_GAIN if m.choice == Choice.AMBIGUOUS else 1.0
         candidates = [(o - H @ self.x, c) for o, c in ((m.offset, m.covariance), *m.alternatives)]
         d2, y, R = self._best(candidates, H, gain, MEASUREMENT_FLOOR_M**2 * np.eye(3))
@@ -681,6 +680,16 @@ class TopsideFilter:
         if self.placed_at is None:
             self.placed_at = m.time
         return True
+
+    def _pair_consider(self, H: np.ndarray, m: PairOffset) -> None:
+        """H's columns (3, ·) of a pair offset's consider states: its markers off by (δθ_W, δp_W) and (δθ_S, δp_S) put
+        it off by δp_S - δp_W - δθ_W × (c_S - c_W)."""
+        w, s = self.consider.markers.get(m.jacket_id), self.consider.markers.get(m.topside_id)
+        if w is not None:
+            H[:, w:w + 3] = skew(self.centres[m.topside_id] - self.centres[m.jacket_id])
+            H[:, w + 3:w + 6] = -np.eye(3)
+        if s is not None:
+            H[:, s + 3:s + 6] = np.eye(3)
 
     def _place_camera(self, cam: CameraState, o: BodyObservation) -> bool:
         """First view of the jacket: the camera's pose from it; an ambiguous one settled by the topside's corners."""
@@ -779,6 +788,10 @@ class TopsideFilter:
             X = self.topside_corners[marker]
         else:
             X = self.jacket_corners[marker]
+        i = self.consider.markers.get(marker)
+        if i is not None and x[i:i + 6].any():  # the marker turned by δθ about its centre and moved by δp
+            c = self.centres[marker]
+            X = c + (X - c) @ rotation(x[i:i + 3]).T + x[i + 3:i + 6]
         pc = X @ T[:3, :3].T + T[:3, 3]
         uv = pc @ K.T
         return (uv[:, :2] / uv[:, 2:3]).reshape(-1)
@@ -806,17 +819,19 @@ class TopsideFilter:
         views = {marker: self._view(cam, marker, K, time).index for marker in sorted(corners)}
         Hs, ys, Rs = [], [], []
         for marker, z in sorted(corners.items()):
-            h, J = self.corner_jacobian(cam, marker, K, columns)
+            i = self.consider.markers.get(marker)
+            cols = columns if i is None else [*columns, *range(i, i + 6)]
+            h, J = self.corner_jacobian(cam, marker, K, cols)
             v = slice(views[marker], views[marker] + VIEW)
             H = np.zeros((8, self.size))
-            H[:, columns] = J
+            H[:, cols] = J
             H[:, v] = np.eye(VIEW)
             y = z.reshape(-1) - h - self.x[v]
             HPH = H @ self.P @ H.T
             R = sigma**2 * np.eye(8)
             if topside and self.clock_sigma.get(cam.name):  # a clock known to σ_t: the topside seen up to σ_t early
                 moved = J[:, :6] @ self.x[6:12] * self.clock_sigma[cam.name]  # or late, (8,) px along its motion
-                R += np.outer(moved, moved)
+                R += np.outer(moved, moved)  # (cone_estimates adds what the cameras' clocks share)
             for j in range(4):  # robust: a corner far off (rain, glare) counts as if at the threshold
                 b = slice(2 * j, 2 * j + 2)
                 d2_j = float(y[b] @ np.linalg.solve(HPH[b, b] + R[b, b], y[b]))
@@ -836,6 +851,12 @@ class TopsideFilter:
             R[8 * k:8 * k + 8, 8 * k:8 * k + 8] = R_k
         self._apply(H, np.concatenate(ys), R)
         return True
+
+    def clock_bound(self, cameras: tuple[str, ...]) -> float:
+        """σ, s, of the time an estimate resting on these cameras (all when none) is the topside's: the largest of their
+        clocks' (rig: time_offset_sigma), a bound whatever their weights and signs. Weighing each camera by its share
+        of the topside's information instead left errors outside 2σ where a synced drone's share was large."""
+        return max((self.clock_sigma.get(c, 0.0) for c in cameras or self.clock_sigma), default=0.0)
 
     def observe(self, o: BodyObservation) -> bool:
         """Apply one camera frame's marker corners; False when no topside corner of it was used.
@@ -901,10 +922,14 @@ class TopsideFilter:
         cameras = self.contributing() if cameras is None else cameras
         warming = self.warming() if warming is None else warming
         limit = REPORT_WARMUP_SIGMA_M if warming else REPORT_MAX_SIGMA_M
+        clock = self.clock_bound(cameras)
         out = []
         for cone, r in sorted(self.cones.items()):
             H = point_offset_matrix(r)
-            cov = H @ P[:STATE, :STATE] @ H.T + self.survey_cov.get(cone, 0.0)
+            cov = H @ P[:STATE, :STATE] @ H.T
+            if clock:  # the estimate is the topside's at a time its cameras' clocks hold to σ: its motion over it
+                speed, rates = H[:, :6] @ x[6:STATE], H[:, :6] @ P[6:STATE, 6:STATE] @ H[:, :6].T
+                cov = cov + clock**2 * (np.outer(speed, speed) + rates)
             offset = H @ x[:STATE] if np.sqrt(np.diag(cov)).max() <= limit else np.full(3, np.nan)
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses))
         return out
@@ -989,6 +1014,7 @@ def _smooth_back(kf: TopsideFilter, steps: list[FilterStep], until: float) -> It
         P_pred = nxt.F.covariance(step.P)
         C = np.linalg.solve(P_pred, nxt.F.apply(step.P)).T  # P Fᵀ P_pred⁻¹ (P_pred symmetric)
         x_s = step.x + C @ (x_s[:n] - nxt.x_pred)
+        x_s[kf.consider.indices] = 0.0  # considered, not estimated (TopsideFilter._apply)
         if step.time < until:
             out.append(kf.cone_estimates(x_s, step.P, step.time, step.cameras, step.warming))
         nxt = step

@@ -423,7 +423,7 @@ WARN_SURVEY_DEG = 0.2  # offsets' σ missing survey errors of 20 mm and 1° (35-
 
 def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
     """One line per default the file leaves to the tracker that changes its numbers (a camera without `mount`, cones
-    without a tip) and per uncertainty the offsets' σ does not hold (clocks, marker surveys)."""
+    without a tip) and per uncertainty that widens the offsets' σ (clocks, marker surveys)."""
     out = [f"{path}: cameras[{i}].mount: not given; {cam.name} is treated as a {DEFAULT_MOUNT} (the loosest motion "
            "prior: a still camera reads worse; give fixed or vessel)"
            for i, cam in enumerate(rig.cameras) if "mount" not in cam.model_fields_set]
@@ -439,16 +439,17 @@ def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
     if loose:
         worst = max(c.time_offset_sigma for c in loose)
         out.append(f"{path}: cameras[].time_offset_sigma: {', '.join(c.name for c in loose)} state clocks known to "
-                   f"±{worst:.2g} s; the offsets' σ does not hold such clock errors while the topside moves (at "
-                   f"{WARN_SPEED_MPS} m/s, {worst * WARN_SPEED_MPS * 1000:.0f} mm): measure them with topside sync")
+                   f"±{worst:.2g} s; the offsets' σ grows by the topside's motion over that time (at {WARN_SPEED_MPS} "
+                   f"m/s, {worst * WARN_SPEED_MPS * 1000:.0f} mm), so moving cones may be withheld: measure them with "
+                   "topside sync")
     sigmas = [s for s in (rig.marker_sigma(m) for m in rig.markers) if s is not None]
     if sigmas and (max(float(s.position().max()) for s in sigmas) > WARN_SURVEY_M
                    or max(float(np.degrees(s.tilt_rad().max())) for s in sigmas) > WARN_SURVEY_DEG):
         position = max(float(s.position().max()) for s in sigmas)
         tilt = max(float(np.degrees(s.tilt_rad().max())) for s in sigmas)
         out.append(f"{path}: survey_sigma: markers known to {position * 1000:.0f} mm and {tilt:.2g}° (1σ); the "
-                   "offsets' σ holds only part of such survey errors (a marker's tilt turns the topside's pose): "
-                   "refine them with topside survey, or survey the markers better")
+                   "offsets' σ grows by what such errors do at each cone (a marker's tilt turns the topside's pose), "
+                   "and cones may be withheld: refine them with topside survey, or survey the markers better")
     return tuple(out)
 
 

@@ -157,15 +157,15 @@ def test_warning_for_a_cone_without_a_tip(tmp_path: Path) -> None:
                             "not at the cone tip",)
 
 
-def test_warnings_for_clocks_and_surveys_the_sigma_does_not_hold(tmp_path: Path) -> None:
+def test_warnings_for_clocks_and_surveys_that_widen_the_sigma(tmp_path: Path) -> None:
     data = yaml.safe_load(yaml.safe_dump(RIG))
     data["cameras"][0].update(mount="vessel", time_offset_sigma=0.29)
     data["survey_sigma"] = {"position_m": 0.02, "tilt_deg": 1.0}
     path = _write(tmp_path, data)
     clocks, survey = load_rig(path).warnings
     assert clocks == (f"{path}: cameras[].time_offset_sigma: stern-1 state clocks known to ±0.29 s; the offsets' σ "
-                      "does not hold such clock errors while the topside moves (at 0.25 m/s, 72 mm): measure them "
-                      "with topside sync")
+                      "grows by the topside's motion over that time (at 0.25 m/s, 72 mm), so moving cones may be "
+                      "withheld: measure them with topside sync")
     assert survey.startswith(f"{path}: survey_sigma: markers known to 20 mm and 1° (1σ);")
     assert survey.endswith("refine them with topside survey, or survey the markers better")
     data["cameras"][0]["time_offset_sigma"] = 0.005  # a synced clock, a good survey: nothing to say

@@ -7,6 +7,7 @@ import pytest
 
 from tests.synthetic import CAMERA_EYES, CONE_A, JACKET_MARKER_Z, MATED_RISE, PAPER_K, look_at, rig_dict
 from tracking.errors import InputError
+from tracking.fusion import TopsideFilter
 from tracking.offsets import BodyObservation
 from tracking.pose import BodyPose, Choice, marker_object_points
 from tracking.rig import Rig
@@ -118,20 +119,51 @@ def test_without_a_survey_sigma_it_says_what_it_needs() -> None:
         survey_markers(the_rig, observations(the_rig)[:40])
 
 
-def test_the_filter_widens_its_sigma_by_the_survey_sigma() -> None:
-    from tracking.fusion import TopsideFilter, survey_covariance
+def with_topside(o: BodyObservation) -> BodyObservation:
+    """The observation with the topside's pose from its jacket pose, as a one-frame estimate would place it."""
+    assert o.jacket is not None
+    T = o.jacket.T_camera_body @ topside_motion(o.time)
+    topside = BodyPose("topside", (2, 4), T, 1e-4 * np.eye(6), 0.1, Choice.UNIQUE)
+    return BodyObservation(o.time, o.camera, o.jacket, topside, o.corners, o.K)
 
-    assert survey_covariance(rig(survey=False, references=())) == {}
-    surveyed = rig(references=())
-    cov = survey_covariance(surveyed)
-    sd = np.sqrt(np.diag(cov["A"]))
-    # two pairs at cone A, each off by both markers' 20 mm (28 mm an axis) and its jacket marker's 1° over the
-    # 1.8 m lever to its topside marker (31 mm across it), the cone tip 1-2 m from the markers: 2-6 cm an axis
-    assert np.all(sd > 0.015) and np.all(sd < 0.06), sd
-    kf = TopsideFilter(surveyed)
-    kf.time = 0.0
-    (est,) = kf.cone_estimates(cameras=(), warming=False)
-    assert np.all(np.diag(est.covariance) >= np.diag(cov["A"]))  # the filter's own σ, widened by the survey's
-    # a reference marker is exact: with both of a pair's markers references only the other pair's errors remain
-    held = survey_covariance(rig(references=(1, 2)))
-    assert np.all(np.diag(held["A"]) < np.diag(cov["A"]))
+
+def test_the_filter_carries_the_survey_sigma_and_holds_the_error_inside_it() -> None:
+    from tracking.fusion import fused_estimates
+
+    obs = [with_topside(o) for o in observations(rig())]  # markers 3 and 4 truly 18-25 mm and about 1° off the rig
+    exact = TopsideFilter(rig(survey=False))
+    assert exact.consider.prior.size == 0  # a rig without survey σ: the filter as before
+    held = rig()  # references 1 and 2 exact, 3 and 4 known to 20 mm and 1°
+    kf = TopsideFilter(held)
+    assert set(kf.consider.markers) == set(DISPLACED)
+    estimates = {False: [], True: []}
+    for surveyed in estimates:
+        for e in fused_estimates(held if surveyed else rig(survey=False), obs):
+            if e.time > SECONDS / 2:
+                estimates[surveyed].append(e)
+    T = topside_motion(estimates[True][-1].time)
+    tip = np.array(held.cones["A"])
+    truth = T[:3, :3] @ tip + T[:3, 3] - tip
+    last = {surveyed: es[-1] for surveyed, es in estimates.items()}
+    sd, blind = (np.sqrt(np.diag(last[k].covariance)) for k in (True, False))
+    error, blind_error = (last[k].offset - truth for k in (True, False))
+    assert np.all(np.abs(error) < 2 * sd), (error, sd)
+    # without the survey σ the filter took the displaced markers as exact: 23-25 mm off at σ 2 mm; with it, it leans on
+    # the exact references (1 and 2) and is off by 2 mm at most
+    assert np.any(np.abs(blind_error) > 3 * blind), (blind_error, blind)
+    assert np.linalg.norm(error) < np.linalg.norm(blind_error) / 5
+    # with no reference the survey's error cannot be told from the footage: it stays in σ however long they look
+    unreferenced = list(fused_estimates(rig(references=()), obs))[-1]
+    assert np.all(np.sqrt(np.diag(unreferenced.covariance)) > 0.01)
+
+
+def test_consider_states_are_never_estimated() -> None:
+    kf = TopsideFilter(rig(references=()))
+    c = kf.consider.indices
+    prior = kf.P[c, c].copy()
+    for o in map(with_topside, observations(rig())[:60]):
+        kf.predict(o.time, [o])
+        kf.update(o)
+    assert kf.topside_placed
+    assert np.array_equal(kf.P[c, c], prior) and not kf.x[c].any()  # Schmidt: the survey stays as the rig states it
+    assert np.abs(kf.P[:6, c]).max() > 0  # ... and is carried to the topside
