@@ -233,8 +233,7 @@ class _Model:
         r = np.einsum("nij,nj->ni", self.s.whiten, self.s.offset - pred).reshape(-1)
         P = x[self.o_p:self.o_w].reshape(-1, 3)
         W = x[self.o_w:self.o_b].reshape(-1, 3)
-        accel = (P[2:] - 2 * P[1:-1] + P[:-2]).reshape(-1) / (self.p.h**2 * ACCEL_MPS2)
-        angular = (W[2:] - 2 * W[1:-1] + W[:-2]).reshape(-1) / (self.w.h**2 * ANGULAR_ACCEL_RADPS2)
+        accel, angular = motion_prior(P, self.p.h, W, self.w.h)
         return np.concatenate([r, x[self.o_w:self.o_b] / ROTATION_PRIOR_RAD, x[self.o_b:] / BIAS_PRIOR_M, accel,
                                angular])
 
@@ -268,15 +267,7 @@ class _Model:
         cols += [self.o_w + np.arange(nw), self.o_b + np.arange(nb3)]
         vals += [np.full(nw, 1 / ROTATION_PRIOR_RAD), np.full(nb3, 1 / BIAS_PRIOR_M)]
         m1 = m0 + nw + nb3
-        for spline, offset, scale in ((self.p, self.o_p, self.p.h**2 * ACCEL_MPS2),
-                                      (self.w, self.o_w, self.w.h**2 * ANGULAR_ACCEL_RADPS2)):
-            k = np.arange(3 * (spline.n - 2))  # rows: (knot j, axis a) for j = 1 .. n-2
-            j, a = k // 3, k % 3
-            for shift, value in ((0, 1.0), (1, -2.0), (2, 1.0)):
-                rows.append(m1 + k)
-                cols.append(offset + 3 * (j + shift) + a)
-                vals.append(np.full(k.size, value / scale))
-            m1 += k.size
+        m1 = motion_prior_rows(rows, cols, vals, m1, ((self.p, self.o_p), (self.w, self.o_w)))
         J = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m1, self.size))
         return J.tocsr()
 
@@ -299,6 +290,28 @@ class _Model:
             if np.all(np.abs(step[:self.o_p]) < STEP_TOLERANCE_S):
                 break
         return x
+
+
+def motion_prior(P: np.ndarray, h_p: float, W: np.ndarray, h_w: float) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals of the topside motion's prior: second differences of the translation's knots P (n, 3) and the
+    rotation's W (m, 3), knots h_p and h_w s apart, over h² times ACCEL_MPS2 and ANGULAR_ACCEL_RADPS2."""
+    return ((P[2:] - 2 * P[1:-1] + P[:-2]).reshape(-1) / (h_p**2 * ACCEL_MPS2),
+            (W[2:] - 2 * W[1:-1] + W[:-2]).reshape(-1) / (h_w**2 * ANGULAR_ACCEL_RADPS2))
+
+
+def motion_prior_rows(rows: list, cols: list, vals: list, first: int,
+                      splines: tuple[tuple[Spline, int], tuple[Spline, int]]) -> int:
+    """motion_prior's Jacobian appended to a sparse Jacobian's (rows, cols, vals) from row first (splines: the
+    translation's and the rotation's, each with its first column); returns the next free row."""
+    for (spline, offset), accel in zip(splines, (ACCEL_MPS2, ANGULAR_ACCEL_RADPS2), strict=True):
+        k = np.arange(3 * (spline.n - 2))  # rows: (knot j, axis a) for j = 1 .. n-2
+        j, a = k // 3, k % 3
+        for shift, value in ((0, 1.0), (1, -2.0), (2, 1.0)):
+            rows.append(first + k)
+            cols.append(offset + 3 * (j + shift) + a)
+            vals.append(np.full(k.size, value / (spline.h**2 * accel)))
+        first += k.size
+    return first
 
 
 def _solve(J: csr_matrix, r: np.ndarray) -> np.ndarray:

@@ -32,14 +32,14 @@ from scipy.sparse import coo_matrix, csc_matrix, diags
 from scipy.sparse.linalg import splu
 
 from tracking.clocks import (
-    ACCEL_MPS2,
-    ANGULAR_ACCEL_RADPS2,
     KNOT_S,
     ROTATION_KNOT_S,
     UNKNOWN_SIGMA_S,
     Spline,
     _Model,
     _samples,
+    motion_prior,
+    motion_prior_rows,
 )
 from tracking.errors import InputError
 from tracking.offsets import BodyObservation, PairOffset
@@ -270,8 +270,7 @@ class _Bundle:
         M = x[self.o_m:self.o_v].reshape(-1, 6) / self.priors
         P = x[self.o_t:self.o_w].reshape(-1, 3)
         W = x[self.o_w:self.o_m].reshape(-1, 3)
-        accel = (P[2:] - 2 * P[1:-1] + P[:-2]).reshape(-1) / (self.trans.h**2 * ACCEL_MPS2)
-        angular = (W[2:] - 2 * W[1:-1] + W[:-2]).reshape(-1) / (self.rot.h**2 * ANGULAR_ACCEL_RADPS2)
+        accel, angular = motion_prior(P, self.trans.h, W, self.rot.h)
         return np.concatenate([M.reshape(-1), accel, angular, x[self.o_v:] / VIEW_BIAS_PX])
 
     def jacobian(self, x: np.ndarray) -> csc_matrix:
@@ -312,15 +311,7 @@ class _Bundle:
         cols.append(self.o_m + np.arange(nm))
         vals.append(1.0 / self.priors.reshape(-1))
         m1 = m0 + nm
-        for spline, offset, scale in ((self.trans, self.o_t, self.trans.h**2 * ACCEL_MPS2),
-                                      (self.rot, self.o_w, self.rot.h**2 * ANGULAR_ACCEL_RADPS2)):
-            k = np.arange(3 * (spline.n - 2))
-            j, a = k // 3, k % 3
-            for shift, value in ((0, 1.0), (1, -2.0), (2, 1.0)):
-                rows.append(m1 + k)
-                cols.append(offset + 3 * (j + shift) + a)
-                vals.append(np.full(k.size, value / scale))
-            m1 += k.size
+        m1 = motion_prior_rows(rows, cols, vals, m1, ((self.trans, self.o_t), (self.rot, self.o_w)))
         nv = self.size - self.o_v
         rows.append(m1 + np.arange(nv))
         cols.append(self.o_v + np.arange(nv))
