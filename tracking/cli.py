@@ -116,6 +116,25 @@ def _warn_lines(lines: tuple[str, ...] | list[str]) -> None:
         err_console.print(f"topside: warning: {line}", markup=False)
 
 
+def _measurements(the_rig, run, refine: Refinement, sinks: list, stats, plans, advance: Callable[[], None],
+                  roi: bool = False, warn: bool = False):
+    """The tracked frames' pair offsets and body observations in capture-time order (parallel.track_chunks), each
+    frame counted in stats, advanced on the progress bar, passed to the sinks and, with warn, its warnings printed."""
+    from tracking.parallel import track_chunks
+
+    for result in track_chunks(the_rig, run, refine, packets=bool(sinks), keep_gray=bool(sinks), roi_tracking=roi,
+                               stats=stats, plans=plans):
+        stats.add(result)
+        advance()
+        if warn:
+            _warn_lines(result.warnings)
+        for sink in sinks:
+            sink.on_frame(result)
+        yield from result.offsets
+        if result.observation is not None:
+            yield result.observation
+
+
 def _progress() -> Progress:
     return Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                     TimeElapsedColumn(), console=err_console, transient=True)
@@ -281,7 +300,7 @@ def track(
     Each camera's video is cut into chunks at keyframes, tracked in worker processes (--workers) or Ray tasks
     (--ray) and fused here in capture-time order: the output is the same whatever runs the chunks."""
     from tracking.evaluate import read_truth
-    from tracking.parallel import plan_rig, runner, track_chunks
+    from tracking.parallel import plan_rig, runner
     from tracking.pipeline import TrackStats
     from tracking.report import OffsetsWriter
     from tracking.rig import load_rig
@@ -315,21 +334,11 @@ def track(
                                            vessel, operator, video))
             task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras", total=total)
 
-            def measurements():
-                for result in track_chunks(the_rig, run, refine, packets=bool(sinks), keep_gray=bool(sinks),
-                                           roi_tracking=roi, stats=stats, plans=plans):
-                    stats.add(result)
-                    progress.advance(task)
-                    _warn_lines(result.warnings)
-                    for sink in sinks:
-                        sink.on_frame(result)
-                    yield from result.offsets
-                    if result.observation is not None:
-                        yield result.observation
-
+            measurements = _measurements(the_rig, run, refine, sinks, stats, plans, lambda: progress.advance(task),
+                                         roi=roi, warn=True)
             try:
                 with OffsetsWriter(csv_partial) as writer:
-                    for e in estimator(the_rig, measurements()):
+                    for e in estimator(the_rig, measurements):
                         for sink in sinks:
                             sink.on_estimate(e)
                         writer.write(e)
@@ -459,7 +468,6 @@ def _batch_one(inst, the_rig, plans, error: str, run, refine: Refinement, progre
     from tracking.batch import ACCURACY_NAME, OFFSETS_NAME, RRD_NAME, Outcome
     from tracking.evaluate import evaluate_runs, evaluation_markdown, read_offsets, read_truth
     from tracking.outputs import write_text
-    from tracking.parallel import track_chunks
     from tracking.pipeline import TrackStats
     from tracking.report import OffsetsWriter
 
@@ -483,20 +491,10 @@ def _batch_one(inst, the_rig, plans, error: str, run, refine: Refinement, progre
                 sinks.append(Recorder(the_rig, outputs.claim(rrd), truth_df, options={"mode": inst.mode,
                                                                                       "refine": refine.value}))
 
-            def measurements():
-                for result in track_chunks(the_rig, run, refine, packets=bool(sinks), keep_gray=bool(sinks),
-                                           stats=stats, plans=plans):
-                    stats.add(result)
-                    progress.advance(task)
-                    for sink in sinks:
-                        sink.on_frame(result)
-                    yield from result.offsets
-                    if result.observation is not None:
-                        yield result.observation
-
+            measurements = _measurements(the_rig, run, refine, sinks, stats, plans, lambda: progress.advance(task))
             try:
                 with OffsetsWriter(outputs.claim(csv)) as writer:
-                    for e in ESTIMATORS[inst.mode](the_rig, measurements()):
+                    for e in ESTIMATORS[inst.mode](the_rig, measurements):
                         for sink in sinks:
                             sink.on_estimate(e)
                         writer.write(e)
