@@ -6,10 +6,13 @@ times. A camera whose clock is off by τ samples that motion τ late: its offset
 topside moves. So the offsets of all cameras are fitted together with one motion (translation p(t) and small
 rotation ω(t) of the topside, cubic B-splines) and a clock offset per camera (the reference's held at zero):
 
-    o(t) = p(t + τ_c) - [r]× ω(t + τ_c) + b
+    o(t) = (I + [ε]×) (p(t + τ_c) - [r]× ω(t + τ_c)) + b
 
 r the topside marker's centre, b a constant per camera and pair (the pair's survey errors and each camera's
-persistent corner errors do not move in time, so they say nothing of clocks). What is observable: τ_c is the shift
+persistent corner errors do not move in time, so they say nothing of clocks), ε a small rotation per camera and pair
+with the jacket marker's survey tilt σ as its prior: a jacket marker turned 1° off its survey turns the pair's offsets
+with it, 350 mm at 20 m, which grows as the topside comes in and, taken as surveyed, read as a lag (clocks 74-158 ms
+off in config2-setdown-realities without it, 19-45 ms with it). What is observable: τ_c is the shift
 that lines a camera's offsets up with the others' along the topside's velocity, so its information is the squared
 velocity over the offsets' variance along it. A still topside gives nothing; a topside moving 0.05 m/s, seen by a
 camera whose offsets scatter by 5 mm, gives 0.1 s per frame, a few milliseconds over a minute. The cameras' own
@@ -18,10 +21,10 @@ drone's motion is its own. The shared wave motion of vessel-mounted cameras woul
 a still topside; it is left out (see the README).
 
 A first estimate comes from the cross-correlation of each camera's topside velocity with the reference's (within
-±SEARCH_S); the joint fit (Gauss-Newton on sparse normal equations, soft-L1 weights) refines it. Each camera's σ comes
-from the fit's covariance, scaled by its residuals' spread and by their correlation in time (a view's corner errors last
-for seconds, so its frames are not independent). Where σ exceeds UNKNOWN_SIGMA_S the offset is not changed and the
-reason is given.
+±SEARCH_S); the joint fit (Gauss-Newton on sparse normal equations, soft-L1 weights) refines it. Each camera's σ is the
+larger of the fit's covariance, scaled by its residuals' spread and by their correlation in time (a view's corner errors
+last for seconds, so its frames are not independent), and a cluster-robust (sandwich) variance over CLUSTER_S blocks of
+every camera's residuals. Where σ exceeds UNKNOWN_SIGMA_S the offset is not changed and the reason is given.
 """
 
 from __future__ import annotations
@@ -49,6 +52,8 @@ ANGULAR_ACCEL_RADPS2 = 1e-3  # σ of the topside's angular acceleration (second 
 # cones) turns a 20 ms lag at 0.05 m/s into 5e-5 rad, within any looser bound
 ACCEL_MPS2 = 1.0  # σ of the topside's acceleration (second differences of its translation's knots): a crane hook in
 # waves, a swinging load; only bridges frames no camera saw
+TILT_FLOOR_RAD = np.radians(0.2)  # σ of a pair's frame rotation beside the survey's: a far camera's view of the jacket
+# marker's face
 BIAS_PRIOR_M = 1.0  # σ of each camera's constant bias per pair: only fixes the gauge between p and the biases
 OFFSET_FLOOR_M = 0.002  # σ added to every offset axis: corner noise the pose covariance does not hold (rain, coding)
 SEARCH_S = 2.0  # the first estimate looks this far either side of the rig's offset, s
@@ -58,6 +63,8 @@ UNKNOWN_SIGMA_S = 0.01  # beyond this σ, a camera's offset is not changed: the 
 # issue's target; the stated σ of a far stern camera misses its systematic errors (config1-procedure1-realities:
 # stern4 148 ms off at a stated σ of 17 ms, stern1 84 ms at 16 ms on the run's second half), so no looser bound
 MAX_CORRELATION_LAG = 60  # residual autocorrelation summed over at most this many frames (4 s at 15 FPS)
+CLUSTER_S = 20.0  # residuals within blocks this long count as correlated (σ's sandwich): a far camera's depth wanders
+# for tens of seconds as the topside's view changes (at 5 s blocks config1-procedure1's stern1 was 87 ms off at σ 32 ms)
 SOFT_L1_SCALE = 3.0  # whitened residuals beyond this count linearly (rain-struck corners, a wrong IPPE pose)
 MAX_ITERATIONS = 20  # Gauss-Newton steps of the joint fit
 STEP_TOLERANCE_S = 1e-5  # ... until no clock moves by more than this
@@ -97,6 +104,7 @@ class _Samples:
     whiten: np.ndarray  # (N, 3, 3) Lᵀ with L Lᵀ = inverse covariance
     r: np.ndarray  # (N, 3) topside marker centre, topside frame, m
     bias: np.ndarray  # (N,) index of the (camera, pair) bias
+    tilt: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (B,) σ of each (camera, pair)'s frame rotation, rad
     axis_sigma: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (N, 3) σ per axis, m
 
 
@@ -137,6 +145,7 @@ def _samples(rig: Rig, offsets: Iterable[PairOffset], cameras: list[str]) -> _Sa
     centres = {m.id: np.array(m.center, dtype=float) for m in rig.markers}
     index = {name: k for k, name in enumerate(cameras)}
     biases: dict[tuple[str, str, str], int] = {}
+    tilts: list[float] = []
     rows = []
     for m in offsets:
         if m.camera not in index or m.choice == Choice.AMBIGUOUS:
@@ -147,14 +156,25 @@ def _samples(rig: Rig, offsets: Iterable[PairOffset], cameras: list[str]) -> _Sa
         except np.linalg.LinAlgError:
             continue
         b = biases.setdefault((m.camera, m.cone, m.face), len(biases))
+        if b == len(tilts):
+            tilts.append(_tilt_sigma(rig, m.jacket_id))
         rows.append((index[m.camera], m.time, m.offset, L.T, centres[m.topside_id], b, np.sqrt(np.diag(C))))
     if not rows:
         return _Samples(np.zeros(0, int), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3)),
-                        np.zeros(0, int), np.zeros((0, 3)))
+                        np.zeros(0, int), np.zeros(0), np.zeros((0, 3)))
     rows.sort(key=lambda r: r[1])
     cols = list(zip(*rows, strict=True))
     return _Samples(np.array(cols[0]), np.array(cols[1], dtype=float), np.array(cols[2]), np.array(cols[3]),
-                    np.array(cols[4]), np.array(cols[5]), np.array(cols[6]))
+                    np.array(cols[4]), np.array(cols[5]), np.array(tilts), np.array(cols[6]))
+
+
+def _tilt_sigma(rig: Rig, jacket_id: int) -> float:
+    """σ of the rotation of a pair's offsets (its jacket marker's tilt as the survey leaves it, with a floor for a
+    far camera's view of it), rad."""
+    marker = rig.marker_by_id.get(jacket_id)
+    sigma = rig.marker_sigma(marker) if marker is not None else None
+    tilt = float(np.max(sigma.tilt_rad())) if sigma is not None else 0.0
+    return float(np.hypot(tilt, TILT_FLOOR_RAD))
 
 
 @dataclass(frozen=True)
@@ -189,7 +209,8 @@ def _cross(r: np.ndarray) -> np.ndarray:
 
 
 class _Model:
-    """The joint fit: parameters [τ (free cameras), p knots (3 n), ω knots (3 m), biases (3 B)]."""
+    """The joint fit: parameters [τ (free cameras), p knots (3 n), ω knots (3 m), biases (3 B), frame rotations
+    ε (3 B)]."""
 
     def __init__(self, s: _Samples, free: list[int], reference: int) -> None:
         self.s = s
@@ -203,7 +224,8 @@ class _Model:
         self.o_p = len(free)
         self.o_w = self.o_p + 3 * self.p.n
         self.o_b = self.o_w + 3 * self.w.n
-        self.size = self.o_b + 3 * self.nb
+        self.o_e = self.o_b + 3 * self.nb
+        self.size = self.o_e + 3 * self.nb
         self.rx = _cross(s.r)
 
     def tau(self, x: np.ndarray) -> np.ndarray:
@@ -213,33 +235,38 @@ class _Model:
             taus[c] = x[k]
         return taus[self.s.camera]
 
-    def predict(self, x: np.ndarray) -> tuple[np.ndarray, tuple, tuple, np.ndarray]:
-        """(N, 3) offsets predicted by x, with the bases used and the predicted velocity (N, 3)."""
+    def predict(self, x: np.ndarray) -> tuple[np.ndarray, tuple, tuple, np.ndarray, np.ndarray]:
+        """(N, 3) offsets predicted by x, with the bases used, the predicted velocity (N, 3) and the topside's motion
+        before the pair's frame is turned (N, 3)."""
         t = self.s.time + self.tau(x)
         P = x[self.o_p:self.o_w].reshape(-1, 3)
         W = x[self.o_w:self.o_b].reshape(-1, 3)
-        B = x[self.o_b:].reshape(-1, 3)
+        B = x[self.o_b:self.o_e].reshape(-1, 3)
+        E = x[self.o_e:].reshape(-1, 3)[self.s.bias]
         ip, wp, dp = self.p.basis(t)
         iw, ww, dw = self.w.basis(t)
         omega = np.einsum("nk,nkj->nj", ww, W[iw])
         d_omega = np.einsum("nk,nkj->nj", dw, W[iw])
-        pred = np.einsum("nk,nkj->nj", wp, P[ip]) - np.einsum("nij,nj->ni", self.rx, omega) + B[self.s.bias]
+        motion = np.einsum("nk,nkj->nj", wp, P[ip]) - np.einsum("nij,nj->ni", self.rx, omega)
+        pred = motion + np.cross(E, motion) + B[self.s.bias]  # the pair's frame turned by ε: its jacket marker's tilt
         velocity = np.einsum("nk,nkj->nj", dp, P[ip]) - np.einsum("nij,nj->ni", self.rx, d_omega)
-        return pred, (ip, wp), (iw, ww), velocity
+        velocity = velocity + np.cross(E, velocity)
+        return pred, (ip, wp), (iw, ww), velocity, motion
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """Whitened residuals of the offsets (3 N), then the priors on ω and the biases."""
-        pred, _, _, _ = self.predict(x)
+        pred, *_ = self.predict(x)
         r = np.einsum("nij,nj->ni", self.s.whiten, self.s.offset - pred).reshape(-1)
         P = x[self.o_p:self.o_w].reshape(-1, 3)
         W = x[self.o_w:self.o_b].reshape(-1, 3)
         accel, angular = motion_prior(P, self.p.h, W, self.w.h)
-        return np.concatenate([r, x[self.o_w:self.o_b] / ROTATION_PRIOR_RAD, x[self.o_b:] / BIAS_PRIOR_M, accel,
-                               angular])
+        tilt = (x[self.o_e:].reshape(-1, 3) / self.s.tilt[:, None]).reshape(-1)
+        return np.concatenate([r, x[self.o_w:self.o_b] / ROTATION_PRIOR_RAD, x[self.o_b:self.o_e] / BIAS_PRIOR_M,
+                               tilt, accel, angular])
 
     def jacobian(self, x: np.ndarray) -> csr_matrix:
         """Sparse Jacobian of residuals."""
-        _, (ip, wp), (iw, ww), velocity = self.predict(x)
+        _, (ip, wp), (iw, ww), velocity, motion = self.predict(x)
         n = len(self.s.time)
         Lt = self.s.whiten  # (N, 3, 3)
         rows, cols, vals = [], [], []
@@ -255,6 +282,7 @@ class _Model:
             block(self.o_p + 3 * ip[:, k], -Lt * wp[:, k, None, None])
             block(self.o_w + 3 * iw[:, k], np.einsum("nij,njk->nik", Lt, self.rx) * ww[:, k, None, None])
         block(self.o_b + 3 * self.s.bias, -Lt)
+        block(self.o_e + 3 * self.s.bias, np.einsum("nij,njk->nik", Lt, _cross(motion)))  # d(ε × o)/dε = -[o]×
         d_tau = -np.einsum("nij,nj->ni", Lt, velocity)  # (N, 3)
         for c, k in self.i_tau.items():
             mine = np.flatnonzero(self.s.camera == c)
@@ -263,10 +291,11 @@ class _Model:
             vals.append(d_tau[mine].reshape(-1))
         m0 = 3 * n
         nw, nb3 = self.o_b - self.o_w, 3 * self.nb
-        rows += [m0 + np.arange(nw), m0 + nw + np.arange(nb3)]
-        cols += [self.o_w + np.arange(nw), self.o_b + np.arange(nb3)]
-        vals += [np.full(nw, 1 / ROTATION_PRIOR_RAD), np.full(nb3, 1 / BIAS_PRIOR_M)]
-        m1 = m0 + nw + nb3
+        rows += [m0 + np.arange(nw), m0 + nw + np.arange(nb3), m0 + nw + nb3 + np.arange(nb3)]
+        cols += [self.o_w + np.arange(nw), self.o_b + np.arange(nb3), self.o_e + np.arange(nb3)]
+        vals += [np.full(nw, 1 / ROTATION_PRIOR_RAD), np.full(nb3, 1 / BIAS_PRIOR_M),
+                 np.repeat(1 / self.s.tilt, 3)]
+        m1 = m0 + nw + 2 * nb3
         m1 = motion_prior_rows(rows, cols, vals, m1, ((self.p, self.o_p), (self.w, self.o_w)))
         J = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m1, self.size))
         return J.tocsr()
@@ -326,8 +355,9 @@ def _camera_velocity(s: _Samples, camera: int, grid: np.ndarray, position: bool 
     """One camera's topside velocity (G, 3) (or position, with its own constant bias) on a time grid (G,), from a
     spline through its own offsets alone, and whether each grid time lies within its samples (G,)."""
     mine = np.flatnonzero(s.camera == camera)
-    sub = _Samples(np.zeros(len(mine), int), s.time[mine], s.offset[mine], s.whiten[mine], s.r[mine],
-                   np.unique(s.bias[mine], return_inverse=True)[1], s.axis_sigma[mine])
+    used, bias = np.unique(s.bias[mine], return_inverse=True)
+    sub = _Samples(np.zeros(len(mine), int), s.time[mine], s.offset[mine], s.whiten[mine], s.r[mine], bias,
+                   s.tilt[used], s.axis_sigma[mine])
     model = _Model(sub, [], 0)
     x = model.linear_fit(np.zeros(model.size))
     P = x[model.o_p:model.o_w].reshape(-1, 3)
@@ -443,28 +473,35 @@ def synchronise(rig: Rig, offsets: Iterable[PairOffset], reference: str | None =
 
 
 def _sigmas(model: _Model, x: np.ndarray) -> dict[int, float]:
-    """σ of each free camera's τ (s): the fit's covariance, scaled by the camera's residual spread (robust) and by
-    their correlation in time."""
+    """σ of each free camera's τ (s): the larger of the fit's covariance (scaled by the camera's residual spread and by
+    their correlation in time) and a cluster-robust (sandwich) variance over CLUSTER_S blocks of every camera's
+    residuals, which also holds what the reference's errors and slower drifts do to τ."""
     J = model.jacobian(x)
+    r = model.residuals(x)
+    weight = 1.0 / np.sqrt(1.0 + (r / SOFT_L1_SCALE) ** 2)  # the fit's soft-L1 weights
     info = (J.T @ J).tocsc()
     lu = splu(info + RIDGE * diags(np.maximum(info.diagonal(), 1.0)))
-    cov = {}
-    for k in model.i_tau.values():
-        e = np.zeros(model.size)
-        e[k] = 1.0
-        cov[k] = float(lu.solve(e)[k])
-    pred, _, _, velocity = model.predict(x)
-    res = np.einsum("nij,nj->ni", model.s.whiten, model.s.offset - pred)
+    info_w = (J.T @ diags(weight) @ J).tocsc()
+    lu_w = splu(info_w + RIDGE * diags(np.maximum(info_w.diagonal(), 1.0)))
+    n = 3 * len(model.s.time)
+    block = np.floor((model.s.time - model.s.time.min()) / CLUSTER_S).astype(int)
+    cluster = np.repeat(block * (int(model.s.camera.max()) + 1) + model.s.camera, 3)
+    velocity = model.predict(x)[3]
+    res = r[:n].reshape(-1, 3)
     out = {}
     for c, k in model.i_tau.items():
+        e = np.zeros(model.size)
+        e[k] = 1.0
+        u = lu.solve(e)
+        u_w = lu_w.solve(e)
+        sums = np.bincount(cluster, weights=((J @ u_w) * weight * r)[:n])  # each block's pull on τ
         mine = model.s.camera == c
-        r = res[mine]
-        spread = float(np.median(np.abs(r)) / 0.6745) if r.size else 1.0  # robust σ of whitened residuals
+        spread = float(np.median(np.abs(res[mine])) / 0.6745) if mine.any() else 1.0  # robust σ, whitened
         # the residual along the direction τ moves this camera's offsets: what τ is fitted from
         g = np.einsum("nij,nj->ni", model.s.whiten[mine], velocity[mine])
-        along = np.einsum("ni,ni->n", r, g) / np.maximum(np.linalg.norm(g, axis=1), 1e-12)
-        gain = _correlation_gain(along)
-        out[c] = float(np.sqrt(max(cov[k], 0.0)) * max(spread, 1.0) * np.sqrt(gain))
+        along = np.einsum("ni,ni->n", res[mine], g) / np.maximum(np.linalg.norm(g, axis=1), 1e-12)
+        formal = max(float(u[k]), 0.0) * max(spread, 1.0) ** 2 * _correlation_gain(along)
+        out[c] = float(np.sqrt(max(formal, float(sums @ sums))))
     return out
 
 
