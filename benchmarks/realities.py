@@ -29,10 +29,10 @@ from accuracy import CACHE, detect, frame, render, z_scores
 
 from tracking.clocks import synced_rig, synchronise
 from tracking.evaluate import evaluate_runs
-from tracking.fusion import ESTIMATORS
+from tracking.fusion import ESTIMATORS, rotvec
 from tracking.offsets import BodyObservation, PairOffset
 from tracking.rig import Rig, load_rig
-from tracking.survey import rotvec, survey_markers, surveyed_rig
+from tracking.survey import survey_markers, surveyed_rig
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "benchmarks" / "results" / "realities.md"

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.synthetic import render_installation
+from tests.synthetic import PAPER_DIST, render_installation
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
@@ -24,7 +24,6 @@ def shared_data() -> Path:
 FRAMES = 12
 T0 = 100.0
 FPS = 15.0
-DIST = np.array([-0.08, 0.03, 0.0, 0.0, 0.0])
 
 
 def motion(t: float) -> np.ndarray:
@@ -38,5 +37,5 @@ def installation(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Cone A with two faces filmed by two unsynchronised cameras: rig, calibration, H.264 videos, truth.csv."""
     folder = tmp_path_factory.mktemp("installation")
     t = T0 + np.arange(FRAMES) / FPS
-    render_installation(folder, motion, {"cam-ahead": t, "cam-port": t + 1 / 30}, DIST)
+    render_installation(folder, motion, {"cam-ahead": t, "cam-port": t + 1 / 30}, PAPER_DIST)
     return folder

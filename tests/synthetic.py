@@ -124,6 +124,7 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = UP) -> np.ndar
 
 PAPER_K = np.array([[1258.27, 0.0, 468.746], [0.0, 1259.0, 296.561], [0.0, 0.0, 1.0]])
 PAPER_SIZE = (920, 600)
+PAPER_DIST = np.array([-0.08, 0.03, 0.0, 0.0, 0.0])  # mild barrel distortion for the rendered installations
 
 
 # --- a small installation on disk: cone A, two faces, two cameras, H.264 videos -------------------------

@@ -201,7 +201,7 @@ class Spline:
         return i[:, None] + np.arange(4), w, dw
 
 
-def _cross(r: np.ndarray) -> np.ndarray:
+def cross_matrices(r: np.ndarray) -> np.ndarray:
     """(N, 3, 3) matrices [r]× of vectors r (N, 3)."""
     z = np.zeros(len(r))
     return np.stack([np.stack([z, -r[:, 2], r[:, 1]], 1), np.stack([r[:, 2], z, -r[:, 0]], 1),
@@ -226,7 +226,7 @@ class _Model:
         self.o_b = self.o_w + 3 * self.w.n
         self.o_e = self.o_b + 3 * self.nb
         self.size = self.o_e + 3 * self.nb
-        self.rx = _cross(s.r)
+        self.rx = cross_matrices(s.r)
 
     def tau(self, x: np.ndarray) -> np.ndarray:
         """(N,) clock offset of each sample's camera."""
@@ -282,7 +282,7 @@ class _Model:
             block(self.o_p + 3 * ip[:, k], -Lt * wp[:, k, None, None])
             block(self.o_w + 3 * iw[:, k], np.einsum("nij,njk->nik", Lt, self.rx) * ww[:, k, None, None])
         block(self.o_b + 3 * self.s.bias, -Lt)
-        block(self.o_e + 3 * self.s.bias, np.einsum("nij,njk->nik", Lt, _cross(motion)))  # d(ε × o)/dε = -[o]×
+        block(self.o_e + 3 * self.s.bias, np.einsum("nij,njk->nik", Lt, cross_matrices(motion)))  # d(ε × o)/dε = -[o]×
         d_tau = -np.einsum("nij,nj->ni", Lt, velocity)  # (N, 3)
         for c, k in self.i_tau.items():
             mine = np.flatnonzero(self.s.camera == c)
@@ -312,13 +312,18 @@ class _Model:
         """Gauss-Newton with soft-L1 weights (iteratively reweighted) from x: every parameter."""
         for _ in range(MAX_ITERATIONS):
             r = self.residuals(x)
-            weight = 1.0 / np.sqrt(1.0 + (r / SOFT_L1_SCALE) ** 2)  # soft-L1's IRLS weights
+            weight = soft_l1_weights(r)
             J = self.jacobian(x)
             step = _solve(diags(np.sqrt(weight)) @ J, np.sqrt(weight) * r)
             x = x + step
             if np.all(np.abs(step[:self.o_p]) < STEP_TOLERANCE_S):
                 break
         return x
+
+
+def soft_l1_weights(r: np.ndarray) -> np.ndarray:
+    """Soft-L1's IRLS weights of whitened residuals r (N,): 1 near zero, SOFT_L1_SCALE / |r| far out."""
+    return 1.0 / np.sqrt(1.0 + (r / SOFT_L1_SCALE) ** 2)
 
 
 def motion_prior(P: np.ndarray, h_p: float, W: np.ndarray, h_w: float) -> tuple[np.ndarray, np.ndarray]:
@@ -478,11 +483,9 @@ def _sigmas(model: _Model, x: np.ndarray) -> dict[int, float]:
     residuals, which also holds what the reference's errors and slower drifts do to τ."""
     J = model.jacobian(x)
     r = model.residuals(x)
-    weight = 1.0 / np.sqrt(1.0 + (r / SOFT_L1_SCALE) ** 2)  # the fit's soft-L1 weights
-    info = (J.T @ J).tocsc()
+    weight = soft_l1_weights(r)  # as the fit weighed them
+    info = (J.T @ diags(weight) @ J).tocsc()
     lu = splu(info + RIDGE * diags(np.maximum(info.diagonal(), 1.0)))
-    info_w = (J.T @ diags(weight) @ J).tocsc()
-    lu_w = splu(info_w + RIDGE * diags(np.maximum(info_w.diagonal(), 1.0)))
     n = 3 * len(model.s.time)
     block = np.floor((model.s.time - model.s.time.min()) / CLUSTER_S).astype(int)
     cluster = np.repeat(block * (int(model.s.camera.max()) + 1) + model.s.camera, 3)
@@ -493,8 +496,7 @@ def _sigmas(model: _Model, x: np.ndarray) -> dict[int, float]:
         e = np.zeros(model.size)
         e[k] = 1.0
         u = lu.solve(e)
-        u_w = lu_w.solve(e)
-        sums = np.bincount(cluster, weights=((J @ u_w) * weight * r)[:n])  # each block's pull on τ
+        sums = np.bincount(cluster, weights=((J @ u) * weight * r)[:n])  # each block's pull on τ
         mine = model.s.camera == c
         spread = float(np.median(np.abs(res[mine])) / 0.6745) if mine.any() else 1.0  # robust σ, whitened
         # the residual along the direction τ moves this camera's offsets: what τ is fitted from

@@ -15,7 +15,7 @@ from tracking.errors import InputError
 from tracking.offsets import BodyObservation, PairOffset
 from tracking.rig import Rig, save_rig
 from tracking.sources import SourceKind, source_kind
-from tracking.survey import SurveyFit
+from tracking.survey import SurveyFit, untimed_cameras
 
 LEARNT_SHARE = 0.25  # a marker whose σ the footage cut by less than this share is reported as not told by it
 
@@ -114,8 +114,6 @@ def survey_lines(rig: Rig, fit: SurveyFit) -> list[str]:
     lines = [f"marker {s.id}: moved {np.linalg.norm(s.position_m) * 1e3:.0f} mm and "
              f"{np.degrees(np.linalg.norm(s.rotation_rad)):.2f}° from the rig, beyond the survey's tolerance: check "
              "its mounting and its entry in the rig" for s in fit.markers if s.flagged]
-    from tracking.survey import untimed_cameras
-
     untimed = sorted(untimed_cameras(rig))
     if untimed:
         lines.append(f"{', '.join(untimed)}: clock not measured (topside sync): its views of the topside are left out, "

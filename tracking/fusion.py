@@ -463,9 +463,7 @@ class TopsideFilter:
         self.jacket_corners = {i: body_object_points([T], self.rig.marker_size) for i, T in geometry.jacket.items()}
         self.topside_corners = {i: body_object_points([T], self.rig.marker_size)
                                 for i, T in geometry.topside.items()}
-        markers = self.rig.marker_by_id
-        self.topside_points = {m.id: np.array(m.center) for m in markers.values() if m.body == "topside"}
-        self.centres = {m.id: np.array(m.center, dtype=float) for m in markers.values()}
+        self.centres = {m.id: np.array(m.center, dtype=float) for m in self.rig.markers}
         self.cones = cone_points(self.rig)
         self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}  # s, from the rig
         self.surveys = {c.name: (np.array(c.position, dtype=float), float(c.position_sigma)) for c in self.rig.cameras
@@ -666,7 +664,7 @@ class TopsideFilter:
         if not self.last_accepted and m.choice == Choice.AMBIGUOUS:
             return False  # never start from a pose IPPE could not settle: nothing could gate it
         H = np.zeros((3, self.size))
-        H[:, :STATE] = point_offset_matrix(self.topside_points[m.topside_id])
+        H[:, :STATE] = point_offset_matrix(self.centres[m.topside_id])
         self._pair_consider(H, m)
         gain = AMBIGUOUS_VARIANCE_GAIN if m.choice == Choice.AMBIGUOUS else 1.0
         candidates = [(o - H @ self.x, c) for o, c in ((m.offset, m.covariance), *m.alternatives)]

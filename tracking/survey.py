@@ -38,6 +38,7 @@ from tracking.clocks import (
     Spline,
     _Model,
     _samples,
+    cross_matrices,
     motion_prior,
     motion_prior_rows,
 )
@@ -109,18 +110,8 @@ def rodrigues(v: np.ndarray) -> np.ndarray:
     t = np.where(small, 1.0, theta)
     a = np.where(small, 1.0 - theta**2 / 6, np.sin(t) / t)
     b = np.where(small, 0.5 - theta**2 / 24, (1 - np.cos(t)) / t**2)
-    K = np.zeros((len(v), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    K = cross_matrices(v)
     return np.eye(3)[None] + a[:, None, None] * K + b[:, None, None] * (K @ K)
-
-
-def rotvec(R: np.ndarray) -> np.ndarray:
-    """(3,) rotation vector of a rotation matrix (3, 3) (small to moderate angles)."""
-    c = np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)
-    v = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    s = float(np.linalg.norm(v))
-    return v if s < 1e-12 else v * (np.arctan2(s, c) / s)
 
 
 @dataclass

@@ -6,6 +6,7 @@ import pytest
 from tests.synthetic import (
     CAMERA_EYES,
     CONE_A,
+    PAPER_DIST,
     PAPER_K,
     PAPER_SIZE,
     PlacedMarker,
@@ -20,8 +21,6 @@ from tracking.detection import MarkerDetector
 from tracking.offsets import PairGeometry, frame_offsets, offset_jacobian, pair_geometries, relative_pose
 from tracking.pose import estimate_pose
 from tracking.rig import Rig
-
-DIST = np.array([-0.08, 0.03, 0.0, 0.0, 0.0])
 
 
 def test_relative_pose_is_inverse_composition() -> None:
@@ -65,7 +64,7 @@ def test_offset_jacobian_matches_finite_differences() -> None:
 @pytest.mark.parametrize("offset", [[0.0, 0.0, 0.0], [0.35, -0.2, 0.6], [-1.2, 0.8, 2.5]])
 def test_pair_offsets_from_rendered_frames(offset: list[float]) -> None:
     rig = Rig.model_validate(rig_dict([]))
-    camera = CameraModel(PAPER_K, DIST, *PAPER_SIZE)
+    camera = CameraModel(PAPER_K, PAPER_DIST, *PAPER_SIZE)
     detector = MarkerDetector(rig.dictionary)
     d = np.array(offset)
     for name, eye in CAMERA_EYES.items():
@@ -76,7 +75,7 @@ def test_pair_offsets_from_rendered_frames(offset: list[float]) -> None:
             T[:3, :3] = face_T(face)
             T[:3, 3] = c + (d if body == "topside" else 0.0)
             placed.append(PlacedMarker(mid, np.linalg.inv(T_jacket_cam) @ T, 1.0))
-        image = render(PAPER_K, DIST, PAPER_SIZE, placed, noise=1.0)
+        image = render(PAPER_K, PAPER_DIST, PAPER_SIZE, placed, noise=1.0)
         poses = {m.id: estimate_pose(m, camera, rig.marker_size) for m in detector.detect(image).markers}
         offsets = frame_offsets(pair_geometries(rig), poses, name, time=1.5)
         faces = {o.face for o in offsets}

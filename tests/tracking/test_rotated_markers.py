@@ -8,6 +8,7 @@ import pytest
 from tests.synthetic import (
     CAMERA_EYES,
     CONE_A,
+    PAPER_DIST,
     PAPER_K,
     PAPER_SIZE,
     PlacedMarker,
@@ -25,7 +26,6 @@ from tracking.offsets import body_geometry, frame_offsets, observe_bodies, pair_
 from tracking.pose import estimate_pose
 from tracking.rig import Rig
 
-DIST = np.array([-0.08, 0.03, 0.0, 0.0, 0.0])
 OFFSET = np.array([0.35, -0.2, 0.6])  # the topside's true offset, jacket frame, m
 
 
@@ -72,7 +72,7 @@ def rendered_views() -> dict[str, np.ndarray]:
             T[:3, :3] = turn(face_T(face), TURNS[mid])
             T[:3, 3] = c + (OFFSET if body == "topside" else 0.0)
             placed.append(PlacedMarker(mid, np.linalg.inv(T_jacket_cam) @ T, 1.0))
-        views[name] = render(PAPER_K, DIST, PAPER_SIZE, placed, noise=1.0)
+        views[name] = render(PAPER_K, PAPER_DIST, PAPER_SIZE, placed, noise=1.0)
     return views
 
 
@@ -83,7 +83,7 @@ def views() -> dict[str, np.ndarray]:
 
 def measured(rig: Rig, views: dict[str, np.ndarray]) -> list:
     """Every camera's pair offsets and body observation of its frame."""
-    camera = CameraModel(PAPER_K, DIST, *PAPER_SIZE)
+    camera = CameraModel(PAPER_K, PAPER_DIST, *PAPER_SIZE)
     detector = MarkerDetector(rig.dictionary, camera=camera)
     out = []
     for name, image in views.items():

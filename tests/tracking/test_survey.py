@@ -7,11 +7,11 @@ import pytest
 
 from tests.synthetic import CAMERA_EYES, CONE_A, JACKET_MARKER_Z, MATED_RISE, PAPER_K, look_at, rig_dict
 from tracking.errors import InputError
-from tracking.fusion import TopsideFilter
+from tracking.fusion import TopsideFilter, rotvec
 from tracking.offsets import BodyObservation
 from tracking.pose import BodyPose, Choice, marker_object_points
 from tracking.rig import Rig
-from tracking.survey import rodrigues, rotvec, survey_markers, surveyed_rig
+from tracking.survey import rodrigues, survey_markers, surveyed_rig
 
 FPS = 10.0
 SECONDS = 20.0
