@@ -25,8 +25,9 @@ from viewer.archive import Archive, ArchiveInputs, frame_view
 
 DEFAULT_PORT = 8765  # Foxglove's own default for a WebSocket connection
 SERVER_NAME = "topside"
-LATCHED_SUFFIXES = ("/calibration", "/frames/markers")  # state, not events: a client that subscribes gets the newest
-# message at once (the archive repeats them only every second of capture time)
+LATCHED_SUFFIXES = ("/calibration", "/frames/markers", "/log")  # a client that subscribes gets the newest message at
+# once: calibration and marker frames are state (the archive repeats them only every second of capture time), and the
+# newest log line tells a late client where the session stands (a channel is advertised only once it has a message)
 
 
 class ChannelWriter:
@@ -81,7 +82,7 @@ class ChannelWriter:
 
 
 class Latch(ServerListener):
-    """On a new subscription, the latched topic's newest message (calibration, marker frames)."""
+    """On a new subscription, the latched topic's newest message (calibration, marker frames, log)."""
 
     def __init__(self, writer: ChannelWriter) -> None:
         self.writer = writer

@@ -22,8 +22,9 @@ from tests.viewer.test_playback import free_port, listening_addresses
 from tracking.rig import load_rig
 from tracking.sim.scenario import load_scenario
 from tracking.sim.scene import CONE_SIGNS
-from viewer.archive import ConeOffset
+from viewer.archive import ConeOffset, calibration_message, log_message
 from viewer.foxglove_layout import SCRIPT_PREFIX, foxglove_layout, layout_json, rig_layout
+from viewer.foxglove_live import FoxgloveStream
 
 REPO = Path(__file__).resolve().parents[2]
 LAYOUT = REPO / "docs" / "foxglove-layout.json"
@@ -132,7 +133,7 @@ async def one_of_each_schema(url: str, wanted: set[str], wanted_topics: set[str]
         while not (wanted <= set(decoded) and wanted_topics <= topics) and time.monotonic() < deadline:
             try:
                 raw = await asyncio.wait_for(ws.recv(), timeout=max(0.1, deadline - time.monotonic()))
-            except TimeoutError:
+            except (TimeoutError, websockets.ConnectionClosed):  # the caller's assertions name what was missed
                 break
             if isinstance(raw, str):
                 msg = json.loads(raw)
@@ -181,3 +182,21 @@ def test_live_streams_every_schema_of_the_archive_to_a_foxglove_client(installat
     assert decoded["foxglove.FrameTransforms"].transforms[0].parent_frame_id in ("jacket", "topside")
     assert decoded["topside.CameraHealth"].camera in ("cam-ahead", "cam-port")
     assert not listening_addresses(port)  # the server went with the session
+
+
+def test_a_client_that_joins_late_gets_the_newest_log_line_and_calibration(installation: Path) -> None:
+    stream = FoxgloveStream(load_rig(installation / "rig.yaml"), "127.0.0.1", port=0)
+    try:
+        camera = next(iter(stream.archive.cameras))
+        ns = 1_000_000_000
+        stream.writer.write("/log", log_message(ns, "cone A: TRACKING"), ns)  # before any client is connected
+        stream.writer.write(f"/cameras/{camera}/calibration",
+                            calibration_message(camera, stream.archive.cameras[camera], ns), ns)
+        decoded, topics = asyncio.run(one_of_each_schema(f"ws://127.0.0.1:{stream.port}",
+                                                         {"foxglove.Log", "foxglove.CameraCalibration"}, set(), 30.0))
+    finally:
+        stream.close()
+    assert topics == {"/log", f"/cameras/{camera}/calibration"}
+    assert decoded["foxglove.Log"].message == "cone A: TRACKING"  # where the session stands, with its own time
+    assert decoded["foxglove.Log"].timestamp.seconds == 1
+    assert decoded["foxglove.CameraCalibration"].frame_id == camera
