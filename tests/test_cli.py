@@ -35,7 +35,7 @@ def test_track_raw(installation: Path, tmp_path: Path) -> None:
     proc = run("track", "--rig", installation / "rig.yaml", "--mode", "raw", "-o", out)
     assert proc.returncode == 0, proc.stderr
     df = pd.read_csv(out)
-    assert list(df.columns) == ["time", "cone", "dx", "dy", "dz", "cameras", "sdx", "sdy", "sdz"]
+    assert list(df.columns) == ["time", "cone", "dx", "dy", "dz", "cameras", "sdx", "sdy", "sdz", "withheld"]
     assert len(df) == 2 * FRAMES  # each camera sees one pair in every frame
     assert df["time"].is_monotonic_increasing
     assert set(df["cameras"]) == {"cam-ahead", "cam-port"}

@@ -12,6 +12,8 @@ from tracking.offsets import PairOffset
 from tracking.rig import Rig
 
 PAPER_WINDOW = 10  # samples (eq. 17–20)
+WITHHELD_SIGMA = "σ too large"  # the cameras do not see the cone well enough
+WITHHELD_CLOCKS = "clocks not measured"  # σ within bounds but for the topside's motion over its cameras' clock σ
 
 
 @dataclass(frozen=True)
@@ -25,6 +27,7 @@ class ConeEstimate:
     covariance: np.ndarray | None = None  # (3, 3) m², where the estimator knows it
     T_jacket_cameras: Mapping[str, np.ndarray] | None = None  # (4, 4) per placed camera, where the estimator keeps
     # the cameras' poses (the live fused filter); one mapping shared by the estimates of one time
+    withheld: str = ""  # why the offset is NaN, in a few words (WITHHELD_*), where the estimator withheld it
 
 
 def paper_roles(rig: Rig) -> dict[tuple[str, str], str]:

@@ -49,7 +49,7 @@ from statistics import NormalDist
 import cv2
 import numpy as np
 
-from tracking.filtering import ConeEstimate, paper_filter, raw_estimates
+from tracking.filtering import WITHHELD_CLOCKS, WITHHELD_SIGMA, ConeEstimate, paper_filter, raw_estimates
 from tracking.offsets import MAX_PAIR_TILT_RAD, BodyObservation, PairOffset, body_geometry
 from tracking.pose import BodyPose, Choice, body_object_points
 from tracking.rig import Rig
@@ -924,12 +924,15 @@ class TopsideFilter:
         out = []
         for cone, r in sorted(self.cones.items()):
             H = point_offset_matrix(r)
-            cov = H @ P[:STATE, :STATE] @ H.T
+            cov = timed = H @ P[:STATE, :STATE] @ H.T
             if clock:  # the estimate is the topside's at a time its cameras' clocks hold to σ: its motion over it
                 speed, rates = H[:, :6] @ x[6:STATE], H[:, :6] @ P[6:STATE, 6:STATE] @ H[:, :6].T
                 cov = cov + clock**2 * (np.outer(speed, speed) + rates)
-            offset = H @ x[:STATE] if np.sqrt(np.diag(cov)).max() <= limit else np.full(3, np.nan)
-            out.append(ConeEstimate(time, cone, offset, cameras, cov, poses))
+            withheld = ""
+            if np.sqrt(np.diag(cov)).max() > limit:  # withheld; the clocks' fault when exact clocks would have shown it
+                withheld = WITHHELD_CLOCKS if np.sqrt(np.diag(timed)).max() <= limit else WITHHELD_SIGMA
+            offset = np.full(3, np.nan) if withheld else H @ x[:STATE]
+            out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))
         return out
 
 

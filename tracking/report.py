@@ -10,7 +10,8 @@ import numpy as np
 
 from tracking.filtering import ConeEstimate
 
-OFFSET_COLUMNS = ("time", "cone", "dx", "dy", "dz", "cameras", "sdx", "sdy", "sdz")  # sd*: 1σ, m
+OFFSET_COLUMNS = ("time", "cone", "dx", "dy", "dz", "cameras", "sdx", "sdy", "sdz", "withheld")  # sd*: 1σ, m;
+# withheld: why dx, dy, dz are empty, where the estimator says (tracking.filtering.WITHHELD_*)
 FLUSH_ROWS = 100  # rows between flushes: a killed run keeps all but the last few
 
 
@@ -30,7 +31,7 @@ class OffsetsWriter:
         """One estimate as a row."""
         sd = np.sqrt(np.diag(e.covariance)) if e.covariance is not None else np.full(3, np.nan)
         self._writer.writerow([f"{e.time:.6f}", e.cone, *(f"{v:.5f}" for v in e.offset), " ".join(e.cameras),
-                               *(f"{v:.5f}" for v in sd)])
+                               *(f"{v:.5f}" for v in sd), e.withheld])
         self.rows += 1
         if self.rows % FLUSH_ROWS == 0:
             self._file.flush()

@@ -601,10 +601,11 @@ class Archive:
             dz=estimate.offset[2], sdx=sd[0], sdy=sd[1], sdz=sd[2],
             covariance=np.asarray(cov).reshape(-1).tolist() if cov is not None else [], status=state,
             cameras=list(estimate.cameras)), ns)
-        if self._cone_state.get(estimate.cone) != state:
+        said = f"{state} ({estimate.withheld})" if estimate.withheld else state  # why it is withheld, when known
+        if self._cone_state.get(estimate.cone) != said:
             level = Log.WARNING if state == "outside" else Log.INFO
-            self.file.write("/log", log_message(ns, f"cone {estimate.cone}: {state}", level), ns)
-            self._cone_state[estimate.cone] = state
+            self.file.write("/log", log_message(ns, f"cone {estimate.cone}: {said}", level), ns)
+            self._cone_state[estimate.cone] = said
         self._latest[estimate.cone] = estimate.offset
         full = {c: o for c, o in self._latest.items() if np.all(np.isfinite(o))}
         if full:

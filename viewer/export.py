@@ -134,17 +134,18 @@ def estimates(chunks: dict[str, list[rr.chunk.Chunk]]) -> list[tuple[int, ConeEs
         if not path.startswith(prefix):
             continue
         cone = path[len(prefix):]
-        comps = ["offset", "covariance", "cameras"]
+        comps = ["offset", "covariance", "cameras", "withheld"]  # withheld: absent from older recordings
         keys = {c: next((k for k in entity_chunks[0].to_record_batch().schema.names if k.endswith(c)), c)
                 for c in comps}
         rows = entity_rows(entity_chunks, list(keys.values()))
         for ns, row in sorted(rows.items()):
             cov = np.array(row[keys["covariance"]].as_py(), dtype=np.float64) if keys["covariance"] in row else None
             names = row[keys["cameras"]].as_py()[0] if keys["cameras"] in row else ""
+            withheld = row[keys["withheld"]].as_py()[0] if keys["withheld"] in row else ""
             out.append((ns, ConeEstimate(ns / 1e9, cone, np.array(row[keys["offset"]].as_py(), dtype=np.float64),
                                          tuple(names.split()) if names else (),
                                          cov.reshape(3, 3) if cov is not None and cov.size == 9 else None,
-                                         cameras.get(ns))))
+                                         cameras.get(ns), withheld)))
     return out
 
 

@@ -319,7 +319,7 @@ def log_topside_poses(rec: rr.RecordingStream, times: np.ndarray, T_jacket_topsi
 
 
 def log_estimate_records(rec: rr.RecordingStream, estimates: list[ConeEstimate]) -> None:
-    """Whole estimates (offset, full covariance, cameras) per cone, columnar, for `topside export`."""
+    """Whole estimates (offset, full covariance, cameras, why withheld) per cone, columnar, for `topside export`."""
     for cone in sorted({e.cone for e in estimates}):
         batch = [e for e in estimates if e.cone == cone]
         n = len(batch)
@@ -328,7 +328,8 @@ def log_estimate_records(rec: rr.RecordingStream, estimates: list[ConeEstimate])
                         columns=[*rr.AnyValues.columns(offset=np.array([e.offset for e in batch]).reshape(-1))
                                  .partition([3] * n),
                                  *rr.AnyValues.columns(covariance=cov.reshape(-1)).partition([9] * n),
-                                 *rr.AnyValues.columns(cameras=[" ".join(e.cameras) for e in batch])],
+                                 *rr.AnyValues.columns(cameras=[" ".join(e.cameras) for e in batch]),
+                                 *rr.AnyValues.columns(withheld=[e.withheld for e in batch])],
                         recording=rec)
 
 
@@ -431,7 +432,7 @@ class StatusBoard:
         lines = ["## Cones", "", "| cone | dx [m] | dy [m] | dz [m] | state | cameras |",
                  "|---|---:|---:|---:|---|---|"]
         for cone, e in sorted(self.latest.items()):
-            state = cone_state(e.offset)
+            state = f"{cone_state(e.offset)} ({e.withheld})" if e.withheld else cone_state(e.offset)
             vals = " | ".join("—" if not np.isfinite(v) else f"{v:+.3f}" for v in e.offset)
             lines.append(f"| {cone} | {vals} | {state} | {', '.join(e.cameras)} |")
         lines += ["", "## Cameras", "", "| camera | frames | markers |", "|---|---:|---:|"]

@@ -27,7 +27,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from tracking.filtering import ConeEstimate
+from tracking.filtering import WITHHELD_CLOCKS, WITHHELD_SIGMA, ConeEstimate
 from tracking.fusion import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_M
 from tracking.live import STALE_S, CameraHealth
 from tracking.rig import Rig
@@ -81,6 +81,7 @@ class ConeReading:
     offset: np.ndarray  # (3,) Δx Δy Δz, m
     age: float  # now minus the newest accepted measurement, s
     cameras: tuple[str, ...]
+    withheld: str = ""  # why the estimator withheld the offset (tracking.filtering.WITHHELD_*), when it says
 
 
 def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_measurement: float | None,
@@ -89,7 +90,8 @@ def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_meas
     age = np.inf if last_measurement is None else max(0.0, now - last_measurement)
     if estimate is None or not np.all(np.isfinite(estimate.offset)) or age > stale_s:
         offset = np.full(3, np.nan) if estimate is None else estimate.offset
-        return ConeReading(cone, ConeState.NO_DATA, np.nan, np.nan, offset, age, ())
+        withheld = estimate.withheld if estimate is not None and age <= stale_s else ""
+        return ConeReading(cone, ConeState.NO_DATA, np.nan, np.nan, offset, age, (), withheld)
     dx, dy = estimate.offset[:2]
     r = concentricity(estimate.offset)
     cov = estimate.covariance[:2, :2] if estimate.covariance is not None else np.zeros((2, 2))
@@ -111,8 +113,12 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
     if reading.age > stale_s:
         return (f"newest {reading.age:.1f} s old" if short
                 else f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)")
+    if reading.withheld == WITHHELD_CLOCKS:
+        return WITHHELD_CLOCKS if short else (
+            "the topside moves while its cameras' clocks are known only to the rig's time_offset_sigma, so where it "
+            "is at a frame's time is not known well enough: measure the clocks with topside sync")
     if short:  # not the limit: the reading does not say whether the warm-up's (25 mm) or the later one (50 mm) held
-        return "σ too large"
+        return WITHHELD_SIGMA
     return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_M * 1e3:.0f} mm in the first "
             f"{REPORT_WARMUP_S:g} s after the topside is placed): the cameras do not see this cone well enough")
 

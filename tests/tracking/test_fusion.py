@@ -9,6 +9,7 @@ import pytest
 
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetection
+from tracking.filtering import WITHHELD_CLOCKS
 from tracking.fusion import (
     REPORT_WARMUP_S,
     VIEW_BIAS_TAU_S,
@@ -597,3 +598,19 @@ def test_clocks_known_to_sigma_widen_the_offsets_by_the_motion() -> None:
             assert np.median(sigma[:, 1]) > 0.25 * 0.08 / 2  # astern: the motion over the clocks' σ
         else:
             assert np.mean(np.abs(err[:, 1]) > 2 * sigma[:, 1]) > 0.5  # astern: 16-25 mm off at σ 6 mm
+
+
+def test_an_offset_withheld_for_its_clocks_says_so() -> None:
+    """Clocks stated to ±0.29 s (a rig before topside sync) while the topside moves astern at 0.25 m/s: σ grows past
+    the report limit by the motion alone, and the withheld estimates name the clocks; with exact clocks they show."""
+    stated = camera_rig().model_dump(exclude_none=True)
+    for cam in stated["cameras"]:
+        cam["time_offset_sigma"] = 0.29
+    obs = observations(camera_rig(), 8.0)  # after the warm-up's tighter limit
+    late = [e for e in fused_estimates(Rig.model_validate(stated), obs) if e.cone == "A" and e.time > REPORT_WARMUP_S]
+    exact = [e for e in fused_estimates(camera_rig(), obs) if e.cone == "A" and e.time > REPORT_WARMUP_S]
+    assert all(np.isfinite(e.offset).all() and e.withheld == "" for e in exact)
+    withheld = [e for e in late if not np.isfinite(e.offset).all()]
+    assert len(withheld) > 0.9 * len(late)
+    assert {e.withheld for e in withheld} == {WITHHELD_CLOCKS}
+

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +12,7 @@ import pandas as pd
 import pytest
 from rerun.chunk import RrdReader
 
-from tracking.filtering import ConeEstimate
+from tracking.filtering import WITHHELD_CLOCKS, ConeEstimate
 from viewer.readback import chunks_by_entity, component_rows
 from viewer.superintendent import ConeState, cone_markdown, cone_reading, no_data_reason
 
@@ -46,7 +47,7 @@ def test_segments_each_open_on_their_own(live_run: Path) -> None:
 
 
 def test_superintendent_figures_follow_the_csv(live_run: Path) -> None:
-    df = pd.read_csv(live_run / "offsets.csv").dropna()
+    df = pd.read_csv(live_run / "offsets.csv").dropna(subset=["dx", "dy", "dz"])
     last = pd.read_csv(live_run / "live.segments.csv")["file"].iloc[-1]
     _, docs = component_rows(chunks_by_entity(live_run / last)["/superintendent/cones/A"], "TextDocument:text")
     final = docs[-1][0]
@@ -90,6 +91,11 @@ def test_cone_states() -> None:
     unknown = cone_reading(estimate([np.nan] * 3), "A", 10.1, 10.05)  # the filter's σ beyond its reporting limit
     assert unknown.state == ConeState.NO_DATA and "σ" in cone_markdown(unknown)
     assert no_data_reason(unknown, short=True) == "σ too large"  # the ring's label: no limit that may not be in force
+    untimed = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_CLOCKS), "A", 10.1, 10.05)
+    assert no_data_reason(untimed, short=True) == "clocks not measured" and "topside sync" in cone_markdown(untimed)
+    assert viewer_safe(cone_markdown(untimed))
+    old_news = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_CLOCKS), "A", 10.8, 10.2)
+    assert no_data_reason(old_news, short=True) == "newest 0.6 s old"  # a stale reading: its age, not its clocks
     assert cone_reading(None, "A", 10.1, None).state == ConeState.NO_DATA
 
 
@@ -103,6 +109,6 @@ def test_a_window_of_the_segments(live_run: Path, tmp_path: Path) -> None:
     times, _ = component_rows(chunks["/offsets/dx/A/estimate"], "Scalars:scalars")
     assert times.size and times.max() <= end + 1e-6
     assert times.min() <= start  # opened at the keyframe before --from, so the video decodes from the first frame
-    everything = pd.read_csv(live_run / "offsets.csv").query("cone == 'A'").dropna()
+    everything = pd.read_csv(live_run / "offsets.csv").query("cone == 'A'").dropna(subset=["dx", "dy", "dz"])
     assert times.size < len(everything)
     assert "/world/cameras/cam-port" in chunks  # static data comes along
