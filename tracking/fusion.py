@@ -680,11 +680,14 @@ class TopsideFilter:
         return True
 
     def _pair_consider(self, H: np.ndarray, m: PairOffset) -> None:
-        """H's columns (3, ·) of a pair offset's consider states: its markers off by (δθ_W, δp_W) and (δθ_S, δp_S) put
-        it off by δp_S - δp_W - δθ_W × (c_S - c_W)."""
+        """H's columns (3, ·) of a pair offset's consider states, given its topside columns: its markers off by
+        (δθ_W, δp_W) and (δθ_S, δp_S) put it off by δp_S - δp_W - δθ_W × (p_S - c_W), p_S where the state has the
+        topside marker now (a jacket marker's tilt turns the whole distance, 20 m while the topside comes in)."""
+        assert self.x is not None
         w, s = self.consider.markers.get(m.jacket_id), self.consider.markers.get(m.topside_id)
         if w is not None:
-            H[:, w:w + 3] = skew(self.centres[m.topside_id] - self.centres[m.jacket_id])
+            p_s = self.centres[m.topside_id] + H[:, :STATE] @ self.x[:STATE]
+            H[:, w:w + 3] = skew(p_s - self.centres[m.jacket_id])
             H[:, w + 3:w + 6] = -np.eye(3)
         if s is not None:
             H[:, s + 3:s + 6] = np.eye(3)
