@@ -20,11 +20,12 @@ motion (a vessel's waves, a drone's hovering) is not used: each camera's pose is
 drone's motion is its own. The shared wave motion of vessel-mounted cameras would tie those to each other even with
 a still topside; it is left out (see the README).
 
-A first estimate comes from the cross-correlation of each camera's topside velocity with the reference's (within
-±SEARCH_S); the joint fit (Gauss-Newton on sparse normal equations, soft-L1 weights) refines it. Each camera's σ is the
-larger of the fit's covariance, scaled by its residuals' spread and by their correlation in time (a view's corner errors
-last for seconds, so its frames are not independent), and a cluster-robust (sandwich) variance over CLUSTER_S blocks of
-every camera's residuals. Where σ exceeds UNKNOWN_SIGMA_S the offset is not changed and the reason is given.
+A first estimate comes from matching each camera's topside track with the reference's (within ±SEARCH_S, their
+constant difference removed); the joint fit (Gauss-Newton on sparse normal equations, soft-L1 weights) refines it.
+Each camera's σ is the larger of the fit's covariance, scaled by its residuals' spread and by their correlation in
+time (a view's corner errors last for seconds, so its frames are not independent), and a cluster-robust (sandwich)
+variance over CLUSTER_S blocks of every camera's residuals. Where σ exceeds UNKNOWN_SIGMA_S the offset is not
+changed and the reason is given.
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ BIAS_PRIOR_M = 1.0  # σ of each camera's constant bias per pair: only fixes the
 OFFSET_FLOOR_M = 0.002  # σ added to every offset axis: corner noise the pose covariance does not hold (rain, coding)
 SEARCH_S = 2.0  # the first estimate looks this far either side of the rig's offset, s
 SEARCH_STEP_S = 0.01  # ... in these steps, then a parabola through the best three
-VELOCITY_STEP_S = 0.05  # grid of the cross-correlated velocities, s
+TRACK_STEP_S = 0.05  # grid of the matched tracks, s
 UNKNOWN_SIGMA_S = 0.01  # beyond this σ, a camera's offset is not changed: the motion is too small to tell. The
 # issue's target; the stated σ of a far stern camera misses its systematic errors (config1-procedure1-realities:
 # stern4 148 ms off at a stated σ of 17 ms, stern1 84 ms at 16 ms on the run's second half), so no looser bound
@@ -380,8 +381,8 @@ def first_estimates(s: _Samples, cameras: list[str], reference: int) -> dict[int
     own spline, their constant difference removed: a camera's biases), s; cameras without overlapping motion are left
     out. Velocities, which differentiate each camera's noise, matched the wrong swing of a slow set-down (first
     estimates 0.5-1.1 s off, config2-setdown-realities)."""
-    grid = np.arange(s.time.min(), s.time.max(), VELOCITY_STEP_S)
-    v_ref, in_ref = _camera_velocity(s, reference, grid, position=True)
+    grid = np.arange(s.time.min(), s.time.max(), TRACK_STEP_S)
+    p_ref, in_ref = _camera_velocity(s, reference, grid, position=True)
     out = {}
     shifts = np.arange(-SEARCH_S, SEARCH_S + SEARCH_STEP_S / 2, SEARCH_STEP_S)
     for c in range(len(cameras)):
@@ -390,18 +391,18 @@ def first_estimates(s: _Samples, cameras: list[str], reference: int) -> dict[int
         sig = np.median(s.axis_sigma[s.camera == c], axis=0)
         sig_ref = np.median(s.axis_sigma[s.camera == reference], axis=0)
         weight = 1.0 / (sig**2 + sig_ref**2)
-        v_c, in_c = _camera_velocity(s, c, grid, position=True)
+        p_c, in_c = _camera_velocity(s, c, grid, position=True)
         cost = np.full(len(shifts), np.inf)
         for k, tau in enumerate(shifts):
             # camera c's sample at rig time t is the motion at t + τ: its track at t - τ lines up with the
             # reference's at t
             u = grid - tau
-            j = np.round((u - grid[0]) / VELOCITY_STEP_S).astype(int)
+            j = np.round((u - grid[0]) / TRACK_STEP_S).astype(int)
             ok = in_ref & (j >= 0) & (j < len(grid))
             ok[ok] &= in_c[j[ok]]
             if ok.sum() < 20:
                 continue
-            d = v_c[j[ok]] - v_ref[ok]
+            d = p_c[j[ok]] - p_ref[ok]
             d -= d.mean(axis=0)
             cost[k] = float(np.mean(d**2 @ weight))
         if not np.isfinite(cost).any():

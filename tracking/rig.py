@@ -443,10 +443,9 @@ def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
                    f"m/s, {worst * WARN_SPEED_MPS * 1000:.0f} mm), so moving cones may be withheld: measure them with "
                    "topside sync")
     sigmas = [s for s in (rig.marker_sigma(m) for m in rig.markers) if s is not None]
-    if sigmas and (max(float(s.position().max()) for s in sigmas) > WARN_SURVEY_M
-                   or max(float(np.degrees(s.tilt_rad().max())) for s in sigmas) > WARN_SURVEY_DEG):
-        position = max(float(s.position().max()) for s in sigmas)
-        tilt = max(float(np.degrees(s.tilt_rad().max())) for s in sigmas)
+    position = max((float(s.position().max()) for s in sigmas), default=0.0)
+    tilt = max((float(np.degrees(s.tilt_rad().max())) for s in sigmas), default=0.0)
+    if position > WARN_SURVEY_M or tilt > WARN_SURVEY_DEG:
         out.append(f"{path}: survey_sigma: markers known to {position * 1000:.0f} mm and {tilt:.2g}° (1σ); the "
                    "offsets' σ grows by what such errors do at each cone (a marker's tilt turns the topside's pose), "
                    "and cones may be withheld: refine them with topside survey, or survey the markers better")

@@ -43,19 +43,19 @@ from tracking.clocks import (
     motion_prior_rows,
 )
 from tracking.errors import InputError
+from tracking.fusion import CORNER_NOISE_PX, VIEW_BIAS_PX
 from tracking.offsets import BodyObservation, PairOffset
 from tracking.pose import Choice, marker_object_points
 from tracking.rig import Marker, Pair, Rig, SurveyCorrection, SurveySigma
 
-CORNER_NOISE_PX = 0.15  # σ of a corner coordinate, as the fusion filter takes it (tracking.fusion)
 CORRELATED_FRAMES = 15  # a view's corner errors last about this many frames (a second at 15 FPS: the sub-pixel phase
 # of a marker's edges and the stream's coding of a still picture; tracking.fusion's view biases): its frames count
 # as one in this many. Taken as independent, a minute of a camera at 40 m moved the markers it saw by 80-110 mm at a
 # stated σ of 13 mm (config2-procedure5-realities)
-FIT_NOISE_PX = CORNER_NOISE_PX * float(np.sqrt(CORRELATED_FRAMES))  # the corners' σ in the fit
-VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that lasts as long as its view (camera, marker): a bias per
-# corner coordinate and view, as tracking.fusion has it. At 34 m a 1 m marker spans 37 px: 0.08 px is 0.2 % of its
-# scale, 70 mm of its depth, which no number of frames averages away
+FIT_NOISE_PX = CORNER_NOISE_PX * float(np.sqrt(CORRELATED_FRAMES))  # the corners' σ in the fit (CORNER_NOISE_PX:
+# the fusion filter's frame-to-frame σ; each view (camera, marker) also carries a bias per corner coordinate of the
+# filter's VIEW_BIAS_PX: at 34 m a 1 m marker spans 37 px, so 0.08 px is 0.2 % of its scale, 70 mm of its depth, which
+# no number of frames averages away)
 SOFT_L1_PX = 0.5  # corners further than this from their prediction count linearly (rain, glare)
 MAX_ITERATIONS = 40  # Levenberg-Marquardt steps
 TOLERANCE = 1e-7  # relative decrease of the cost at which it stops

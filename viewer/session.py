@@ -164,7 +164,8 @@ class Recorder:
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id, batcher_config=rr.ChunkBatcherConfig(
             flush_tick=BATCH_TICK_S, flush_num_bytes=BATCH_BYTES))
         self.cameras: dict[str, CameraModel] = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
-        self.cones = sorted({p.cone for p in rig.all_pairs()} | set(rig.cones))
+        self.marked = marked_cones(rig)  # cones with marker pairs
+        self.cones = sorted(self.marked | set(rig.cones))
         self._cone_points = cone_points(rig)  # where each cone's offset applies, as the filter has it
         self.status = StatusBoard()
         self._truth_cones = {c[len("cone_"):-len("_dx")] for c in truth.columns
@@ -200,7 +201,7 @@ class Recorder:
                                                                                  flush_num_bytes=BATCH_BYTES))
             self._view.set_sinks(rr.GrpcSink(viewer), default_blueprint=self._stored_blueprint())
             for cone in self.cones:
-                log_target_circle(self._view, cone, cone in marked_cones(rig))
+                log_target_circle(self._view, cone, cone in self.marked)
         if self._rrd is not None:
             self._rrd.parent.mkdir(parents=True, exist_ok=True)
             if segment_s:
@@ -253,7 +254,7 @@ class Recorder:
         log_series_styles(self.rec, self.cones, self.truth is not None, self.cameras)
         log_plot_key(self.rec, self.cones, self.cameras, self.truth is not None)
         for cone in self.cones:
-            log_target_circle(self.rec, cone, cone in marked_cones(self.rig))
+            log_target_circle(self.rec, cone, cone in self.marked)
         if self.truth is not None and len(self._segments) <= 1:
             log_truth(self.rec, self.truth, self.cones)
             log_true_cameras(self.rec, self.truth, self.cameras)

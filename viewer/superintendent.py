@@ -259,8 +259,8 @@ def cone_column(cone: str, camera: str | None, marked: bool = True) -> rrb.Verti
 
 def superintendent_blueprint(rig: Rig, cone_cameras: Mapping[str, str]) -> rrb.Blueprint:
     """A column per cone (figures, live image, bull's-eye, trend) above the camera table."""
-    cones = sorted(rig.cones) or sorted({p.cone for p in rig.all_pairs()})
     marked = marked_cones(rig)
+    cones = sorted(rig.cones) or sorted(marked)
     columns = [cone_column(cone, cone_cameras.get(cone), cone in marked) for cone in cones]
     return rrb.Blueprint(
         rrb.Vertical(rrb.Horizontal(*columns, name="cones"),
