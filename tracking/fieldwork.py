@@ -92,8 +92,8 @@ def clock_lines(clocks: list[CameraClock]) -> list[str]:
 
 
 def survey_table(rig: Rig, fit: SurveyFit) -> Table:
-    """`topside survey`'s table: each marker's correction and σ (largest over the body's axes; every axis is in the
-    rig written), what the footage taught, flags."""
+    """`topside survey`'s table: each marker's correction and σ as the rig written takes it (largest over the body's
+    axes; every axis is in the rig), what the footage taught, flags."""
     table = Table(title=f"marker poses ({fit.frames} camera frames, {fit.corners} corners, RMS {fit.rms_px:.2f} px)")
     for col in ("marker", "where", "views", "moved [mm]", "σ [mm]", "turned [°]", "σ [°]", "note"):
         table.add_column(col, justify="left" if col in ("where", "note") else "right")
@@ -103,8 +103,8 @@ def survey_table(rig: Rig, fit: SurveyFit) -> Table:
         note = "reference" if s.reference else "FLAGGED" if s.flagged else \
             "survey's σ kept" if s.learnt < LEARNT_SHARE else ""
         table.add_row(str(s.id), f"{m.body[0].upper()} {m.cone}/{m.face}", str(s.views),
-                      f"{np.linalg.norm(s.position_m) * 1e3:.1f}", f"{np.max(s.sigma_m) * 1e3:.1f}",
-                      f"{np.degrees(np.linalg.norm(s.rotation_rad)):.2f}", f"{np.degrees(np.max(s.sigma_rad)):.2f}",
+                      f"{np.linalg.norm(s.position_m) * 1e3:.1f}", f"{np.max(s.held_m) * 1e3:.1f}",
+                      f"{np.degrees(np.linalg.norm(s.rotation_rad)):.2f}", f"{np.degrees(np.max(s.held_rad)):.2f}",
                       note)
     return table
 

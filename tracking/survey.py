@@ -19,7 +19,8 @@ named `reference: true` in the rig (held where the rig has it), or, without one,
 (a correction common to all markers of a body is then as uncertain as the survey: no footage can tell it). What the
 footage cannot tell stays where the survey put it, with the survey's σ: a camera that sees one jacket and one topside
 marker and nothing else cannot tell both moved together (its offsets are the same either way), and a topside moving
-along one line cannot tell a rotation about that line. The σ written for each marker says what was learnt.
+along one line cannot tell a rotation about that line. The σ written for each marker says what was learnt, widened
+to hold what its error shares with other markers' (the fusion filter takes each marker's as independent).
 """
 
 from __future__ import annotations
@@ -62,6 +63,7 @@ TOLERANCE = 1e-7  # relative decrease of the cost at which it stops
 DIFF_STEP = 1e-6  # rad or m: forward differences of one observation's corners
 RIDGE = 1e-9  # relative damping kept in the normal equations: a gauge no prior fixes stays finite
 DEFAULT_TOLERANCE_SIGMAS = 3.0  # without the rig's survey_tolerance, a correction beyond this many prior σ is flagged
+BISECTIONS = 40  # independent_sigmas' search for its scale, in ratios (to 1e-6 of a factor of up to 1e6)
 MIN_VIEWS = 10  # a marker seen in fewer frames keeps its survey pose
 MIN_FORESHORTENING = 0.4  # a marker seen more than 66° off its normal is left out: its corners are biased by up to a
 # pixel (config2-procedure5-realities: drone_A's 104 frames of jacket marker 0 at 77°, 16 by 73 px, moved it and its
@@ -83,13 +85,18 @@ class MarkerSurvey:
     views: int  # camera frames that saw it
     reference: bool = False  # held as its body's datum
     flagged: bool = False  # moved beyond the survey's tolerance
+    held_m: np.ndarray | None = None  # (3,) σ of the centre the rig is given: sigma_m widened where markers' errors
+    # are correlated (independent_sigmas), as the fusion filter takes each marker's as independent, m
+    held_rad: np.ndarray | None = None  # (3,) ... of its rotation, rad
 
     @property
     def learnt(self) -> float:
-        """Share of the survey's position σ the footage removed, along the best-seen axis (0: nothing learnt)."""
+        """Share of the survey's position σ the footage removed, as the rig is given it (held_m), along the best-seen
+        axis (0: nothing learnt)."""
         if self.reference or not np.any(self.prior_m > 0):
             return 0.0
-        return float(np.max(1.0 - self.sigma_m / np.maximum(self.prior_m, 1e-12)))
+        held = self.sigma_m if self.held_m is None else self.held_m
+        return float(max(np.max(1.0 - held / np.maximum(self.prior_m, 1e-12)), 0.0))
 
 
 @dataclass(frozen=True)
@@ -352,17 +359,42 @@ class _Bundle:
         return x, it
 
     def marker_covariance(self, x: np.ndarray) -> np.ndarray:
-        """(M, 6, 6) covariance of each free marker's correction (weights as at x)."""
+        """(6 M, 6 M) joint covariance of the free markers' corrections (δθ, δp of each in slot order; weights as at
+        x): markers the footage ties together, or that move together unseen (a body's datum), are correlated."""
         _, w, _ = self.weighted(x)
         J = diags(np.sqrt(w)) @ self.jacobian(x)
         A = (J.T @ J).tocsc()
         lu = splu((A + diags(RIDGE * np.maximum(A.diagonal(), 1e-12))).tocsc())
-        out = np.zeros((len(self.free), 6, 6))
-        for k in range(len(self.free)):
-            E = np.zeros((self.size, 6))
-            E[self.o_m + 6 * k + np.arange(6), np.arange(6)] = 1.0
-            out[k] = lu.solve(E)[self.o_m + 6 * k:self.o_m + 6 * k + 6]
-        return out
+        m = 6 * len(self.free)
+        E = np.zeros((self.size, m))
+        E[self.o_m + np.arange(m), np.arange(m)] = 1.0
+        C = lu.solve(E)[self.o_m:self.o_m + m]
+        return 0.5 * (C + C.T)
+
+
+def independent_sigmas(covariance: np.ndarray, prior: np.ndarray) -> np.ndarray:
+    """(n,) σ that, taken as independent (as the fusion filter takes each marker's), still hold the joint covariance
+    (n, n): the smallest c (by bisection) for which D = min(prior², c · its diagonal) satisfies D ⪰ covariance, and
+    √D. A correction common to a body's markers (no datum) keeps the survey's σ: the footage cannot tell it, and the
+    markers' own σ would shrink it by √(markers) when taken as independent (config2-procedure5-realities with true
+    clocks: 3 % of y within 2σ, 55 mm off at σ 22 mm)."""
+    var = np.maximum(np.diag(covariance), 1e-30)
+    top = np.maximum(prior**2, var)
+
+    def holds(c: float) -> bool:
+        d = 1.0 / np.sqrt(np.minimum(top, c * var))
+        return float(np.linalg.eigvalsh(covariance * np.outer(d, d))[-1]) <= 1.0 + 1e-9
+
+    if not holds(float(np.max(top / var))):  # the prior itself falls short (a linearised fit): widen it
+        d = 1.0 / np.sqrt(top)
+        return np.sqrt(top * float(np.linalg.eigvalsh(covariance * np.outer(d, d))[-1]))
+    lo, hi = 1.0, float(np.max(top / var))
+    if holds(lo):
+        return np.sqrt(var)
+    for _ in range(BISECTIONS):
+        mid = np.sqrt(lo * hi)
+        lo, hi = (lo, mid) if holds(mid) else (mid, hi)
+    return np.sqrt(np.minimum(top, hi * var))
 
 
 def _initial_motion(rig: Rig, offsets: list[PairOffset], start: float, end: float
@@ -405,6 +437,7 @@ def survey_markers(rig: Rig, measurements: Iterable[PairOffset | BodyObservation
     bundle = _Bundle(rig, v, free, np.array(priors), p0, w0, trans, rot)
     x, iterations = bundle.solve()
     cov = bundle.marker_covariance(x)
+    held = independent_sigmas(cov, np.array(priors).reshape(-1)).reshape(-1, 6)
     res = bundle.residuals(x)
     out = []
     tolerance = rig.survey_tolerance
@@ -415,21 +448,22 @@ def survey_markers(rig: Rig, measurements: Iterable[PairOffset | BodyObservation
         if k in bundle.slot:
             i = bundle.slot[k]
             d = x[bundle.o_m + 6 * i:bundle.o_m + 6 * i + 6]
-            sd = np.sqrt(np.maximum(np.diag(cov[i]), 0.0))
+            sd = np.sqrt(np.maximum(np.diag(cov)[6 * i:6 * i + 6], 0.0))
             limit_m = tolerance.position() if tolerance else DEFAULT_TOLERANCE_SIGMAS * prior_m
             limit_rad = tolerance.tilt_rad() if tolerance else DEFAULT_TOLERANCE_SIGMAS * prior_rad
             flagged = bool(np.any(np.abs(d[3:]) > limit_m) or np.any(np.abs(d[:3]) > limit_rad))
             out.append(MarkerSurvey(m.id, m.body, d[3:].copy(), d[:3].copy(), sd[3:], sd[:3], prior_m, prior_rad,
-                                    int(counts[k]), False, flagged))
+                                    int(counts[k]), False, flagged, held[i, 3:], held[i, :3]))
         else:
             out.append(MarkerSurvey(m.id, m.body, np.zeros(3), np.zeros(3), prior_m, prior_rad, prior_m, prior_rad,
-                                    int(counts[k]), m.reference))
+                                    int(counts[k]), m.reference, held_m=prior_m, held_rad=prior_rad))
     return SurveyFit(out, len(v.T_camera_jacket), 4 * len(v.frame), float(np.sqrt(np.mean(res**2))), iterations)
 
 
 def surveyed_rig(rig: Rig, fit: SurveyFit) -> Rig:
-    """The rig with every surveyed marker moved to where the footage puts it, its correction and its σ; pairs' mated
-    offsets follow the corrected centres."""
+    """The rig with every surveyed marker moved to where the footage puts it, its correction and its σ as the filter
+    may take it (held_m, held_rad: independent of the other markers'); pairs' mated offsets follow the corrected
+    centres."""
     by_id = {s.id: s for s in fit.markers}
     markers: list[Marker] = []
     for m in rig.markers:
@@ -441,8 +475,8 @@ def surveyed_rig(rig: Rig, fit: SurveyFit) -> Rig:
         markers.append(Marker(
             id=m.id, body=m.body, cone=m.cone, face=m.face, reference=m.reference,
             center=(np.array(m.center) + s.position_m).round(6).tolist(), R=R.round(9).tolist(),
-            sigma=SurveySigma(position_m=s.sigma_m.round(6).tolist(),
-                              tilt_deg=np.degrees(s.sigma_rad).round(6).tolist()),
+            sigma=SurveySigma(position_m=(np.ceil(s.held_m * 1e6) / 1e6).tolist(),
+                              tilt_deg=(np.ceil(np.degrees(s.held_rad) * 1e6) / 1e6).tolist()),
             correction=SurveyCorrection(position_m=s.position_m.round(6).tolist(),
                                         rotation_deg=np.degrees(s.rotation_rad).round(6).tolist())))
     centres = {m.id: np.array(m.center) for m in markers}

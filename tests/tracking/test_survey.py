@@ -11,7 +11,7 @@ from tracking.fusion import TopsideFilter, rotvec
 from tracking.offsets import BodyObservation
 from tracking.pose import BodyPose, Choice, marker_object_points
 from tracking.rig import Rig
-from tracking.survey import rodrigues, survey_markers, surveyed_rig
+from tracking.survey import independent_sigmas, rodrigues, survey_markers, surveyed_rig
 
 FPS = 10.0
 SECONDS = 20.0
@@ -167,3 +167,33 @@ def test_consider_states_are_never_estimated() -> None:
     assert kf.topside_placed
     assert np.array_equal(kf.P[c, c], prior) and not kf.x[c].any()  # Schmidt: the survey stays as the rig states it
     assert np.abs(kf.P[:6, c]).max() > 0  # ... and is carried to the topside
+
+
+def test_without_a_datum_the_surveyed_rig_keeps_what_no_footage_can_tell() -> None:
+    from tracking.fusion import fused_estimates
+
+    the_rig = rig(references=())  # markers 3 and 4 truly 18-25 mm and about 1° off; no marker held as a datum
+    obs = observations(the_rig)
+    fit = survey_markers(the_rig, obs)
+    surveyed = surveyed_rig(the_rig, fit)
+    for body in ("jacket", "topside"):  # a shift common to a body's markers films like the body moved: its σ stays
+        held = np.array([s.held_m for s in fit.markers if s.body == body])  # the survey's (20 mm) over √2 markers
+        assert np.all(np.sqrt(np.sum(held**2, axis=0)) / len(held) >= 0.9 * 0.02 / np.sqrt(len(held))), held
+    z = []
+    for e in fused_estimates(surveyed, [with_topside(o) for o in obs]):
+        if e.time > SECONDS / 2:
+            T = topside_motion(e.time)
+            tip = np.array(surveyed.cones["A"])
+            z.append(np.abs(e.offset - (T[:3, :3] @ tip + T[:3, 3] - tip)) / np.sqrt(np.diag(e.covariance)))
+    assert np.mean(np.array(z) <= 2, axis=0).min() >= 0.9, np.mean(np.array(z) <= 2, axis=0)
+
+
+def test_independent_sigmas_hold_a_common_error_and_keep_what_is_independent() -> None:
+    prior = np.full(4, 0.02)
+    common = 0.009**2 * np.ones((4, 4)) + 0.003**2 * np.eye(4)  # four markers that move together by 9 mm (their
+    # mean is as uncertain as the survey left it: 20 mm over √4)
+    held = independent_sigmas(common, prior)
+    assert np.linalg.eigvalsh(np.diag(held**-2) @ common).max() <= 1 + 1e-6  # diag(held²) ⪰ the joint covariance
+    assert np.all(held <= prior + 1e-12) and np.all(held > np.sqrt(np.diag(common)))  # widened, never past the survey
+    apart = np.diag([0.004, 0.006, 0.02, 0.01]) ** 2  # independent already: their own σ
+    assert np.allclose(independent_sigmas(apart, prior), [0.004, 0.006, 0.02, 0.01])
