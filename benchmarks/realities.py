@@ -29,7 +29,7 @@ from accuracy import CACHE, detect, frame, render, z_scores
 
 from tracking.clocks import synced_rig, synchronise
 from tracking.evaluate import evaluate_runs
-from tracking.fusion import ESTIMATORS, rotvec
+from tracking.fusion import ESTIMATORS, rotvec, skew
 from tracking.offsets import BodyObservation, PairOffset
 from tracking.rig import Rig, load_rig
 from tracking.survey import survey_markers, surveyed_rig
@@ -90,8 +90,7 @@ def unobservable(given: Rig, truth: Rig, cones: list[str]) -> dict[str, np.ndarr
     least-squares rigid motion of its markers' survey errors, centres and tilts weighted by the rig's survey σ) film the
     same as that body moved the other way, so only the prior knows it; the topside's minus the jacket's, at the cone's
     tip (at its topside marker's centre where the rig has no tip)."""
-    sigma = given.survey_sigma
-    sp, st = sigma.position_m, np.radians(sigma.tilt_deg)
+    sp, st = given.survey_sigma.position()[:, None], given.survey_sigma.tilt_rad()[:, None]  # per body axis
     tips = {p.cone: np.array(given.cones.get(p.cone, given.marker_by_id[p.topside].center), float)
             for p in given.all_pairs()}
     moved = {}
@@ -102,21 +101,16 @@ def unobservable(given: Rig, truth: Rig, cones: list[str]) -> dict[str, np.ndarr
                 continue
             t = truth.marker_by_id[m.id]
             r = np.array(m.center, float)
-            rows.append(np.hstack([np.eye(3), -cross(r)]) / sp)  # d = v + φ × r
-            rhs.append(np.subtract(t.center, m.center) / sp)
+            rows.append(np.hstack([np.eye(3), -skew(r)]) / sp)  # d = v + φ × r
+            rhs.append(np.subtract(t.center, m.center) / sp[:, 0])
             rows.append(np.hstack([np.zeros((3, 3)), np.eye(3)]) / st)  # θ = φ
-            rhs.append(rotvec(t.R_body_marker @ m.R_body_marker.T) / st)
+            rhs.append(rotvec(t.R_body_marker @ m.R_body_marker.T) / st[:, 0])
         moved[body] = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
     out = {}
     for cone in cones:
         at = {b: g[:3] + np.cross(g[3:], tips[cone]) for b, g in moved.items()}
         out[cone] = at["topside"] - at["jacket"]
     return out
-
-
-def cross(r: np.ndarray) -> np.ndarray:
-    """(3, 3) [r]× of r (3,)."""
-    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
 
 
 def run(name: str, survey_seconds: float) -> dict:
@@ -166,13 +160,12 @@ def run(name: str, survey_seconds: float) -> dict:
     timings["survey_true_clocks_s"] = time.perf_counter() - t0
     rigs["exact_clocks_surveyed"] = surveyed_rig(true_clocks, exact_fit)
     measured["exact_clocks_surveyed"] = measure_on(rigs["exact_clocks_surveyed"], given, detections)
+    ref = next(c.camera for c in clocks if c.reference)
     true_markers = given.model_copy(update={"markers": truth_rig.markers, "survey_sigma": None})
     clocks_true_markers = synchronise(true_markers, [m for m in measure_on(true_markers, given, detections)
-                                                     if isinstance(m, PairOffset)], reference=next(
-                                                         c.camera for c in clocks if c.reference))
+                                                     if isinstance(m, PairOffset)], reference=ref)
 
     error = {c.name: t.time_offset - c.time_offset for c, t in zip(given.cameras, truth_rig.cameras, strict=True)}
-    ref = next(c.camera for c in clocks if c.reference)
     scores = {}
     for case in CASES:
         t0 = time.perf_counter()

@@ -83,11 +83,11 @@ class MarkerSurvey:
     prior_m: np.ndarray  # (3,) σ the survey gave the centre, m
     prior_rad: np.ndarray  # (3,) σ the survey gave the rotation, rad
     views: int  # camera frames that saw it
+    held_m: np.ndarray  # (3,) σ of the centre the rig is given: sigma_m widened where markers' errors are correlated
+    # (independent_sigmas), as the fusion filter takes each marker's as independent, m
+    held_rad: np.ndarray  # (3,) ... of its rotation, rad
     reference: bool = False  # held as its body's datum
     flagged: bool = False  # moved beyond the survey's tolerance
-    held_m: np.ndarray | None = None  # (3,) σ of the centre the rig is given: sigma_m widened where markers' errors
-    # are correlated (independent_sigmas), as the fusion filter takes each marker's as independent, m
-    held_rad: np.ndarray | None = None  # (3,) ... of its rotation, rad
 
     @property
     def learnt(self) -> float:
@@ -95,8 +95,7 @@ class MarkerSurvey:
         axis (0: nothing learnt)."""
         if self.reference or not np.any(self.prior_m > 0):
             return 0.0
-        held = self.sigma_m if self.held_m is None else self.held_m
-        return float(max(np.max(1.0 - held / np.maximum(self.prior_m, 1e-12)), 0.0))
+        return float(max(np.max(1.0 - self.held_m / np.maximum(self.prior_m, 1e-12)), 0.0))
 
 
 @dataclass(frozen=True)
@@ -453,10 +452,10 @@ def survey_markers(rig: Rig, measurements: Iterable[PairOffset | BodyObservation
             limit_rad = tolerance.tilt_rad() if tolerance else DEFAULT_TOLERANCE_SIGMAS * prior_rad
             flagged = bool(np.any(np.abs(d[3:]) > limit_m) or np.any(np.abs(d[:3]) > limit_rad))
             out.append(MarkerSurvey(m.id, m.body, d[3:].copy(), d[:3].copy(), sd[3:], sd[:3], prior_m, prior_rad,
-                                    int(counts[k]), False, flagged, held[i, 3:], held[i, :3]))
+                                    int(counts[k]), held[i, 3:], held[i, :3], False, flagged))
         else:
             out.append(MarkerSurvey(m.id, m.body, np.zeros(3), np.zeros(3), prior_m, prior_rad, prior_m, prior_rad,
-                                    int(counts[k]), m.reference, held_m=prior_m, held_rad=prior_rad))
+                                    int(counts[k]), prior_m, prior_rad, m.reference))
     return SurveyFit(out, len(v.T_camera_jacket), 4 * len(v.frame), float(np.sqrt(np.mean(res**2))), iterations)
 
 
