@@ -844,8 +844,13 @@ def survey(
 
 @app.command()
 def simulate(
-    scenario: Annotated[str, typer.Argument(help="Scenario YAML file or built-in name (e.g. config2-procedure5).")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="Output folder for videos, rig, calibration, truth.")],
+    scenario: Annotated[str | None, typer.Argument(
+        help="Scenario YAML file or built-in name (e.g. config2-procedure5, random-17).")] = None,
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="Output folder for videos, rig, calibration, truth.")
+                   ] = None,
+    random: Annotated[int | None, typer.Option(
+        "--random", help="Draw a whole installation from this seed (cameras, markers, lift, weather) instead of a "
+                         "scenario: the same as the scenario random-SEED.", min=0)] = None,
     seed: Annotated[int | None, typer.Option(help="Random seed (default: the scenario's).", min=0)] = None,
     duration: Annotated[float | None, typer.Option(help="Cut the scenario to this many seconds.",
                                                    callback=_finite(0.0))] = None,
@@ -862,8 +867,15 @@ def simulate(
     config1-cone-a (markers at cone A only), calibration-shots;
     add -weather (fog 50 %, rain 30 %), -clear (no weather, no noise) or -realities (clocks off by up to
     ±0.5 s, markers 20 mm and 1° off their survey; truth_rig.yaml has the truth, for benchmarks only).
+    random-SEED (or --random SEED) draws a whole installation from a seed.
     """
     from tracking.sim.command import run_simulate
+
+    if (scenario is None) == (random is None):
+        raise InputError("SCENARIO", "give a scenario or --random SEED (exactly one)")
+    if out is None:
+        raise InputError("--out", "missing (expected the folder to write the simulation into)")
+    scenario = scenario if random is None else f"random-{random}"
 
     run_simulate(scenario, out, seed=seed, duration=duration, clock_error_s=clock_error, survey_error=survey_error)
 

@@ -5,6 +5,8 @@ four stern cameras (one per pair), and one drone on a pair of rear cone C. Confi
 (Fig. 10): pairs on cones A and D; A is filmed by a stern camera and a drone, D by two drones.
 `config1-cone-a` keeps only cone A's pairs and their stern cameras (not in the paper).
 
+`random-SEED` draws a whole installation from a seed (tracking.sim.installations).
+
 Name suffixes: `-weather` adds the paper's fog 50 % and rain 30 %; `-clear` switches off fog, rain,
 noise, shadows, light changes and motion blur (for exact tests); `-realities` gives every camera a clock off by up
 to ±0.5 s and every marker a survey error of 20 mm and 1° (σ), which the rig does not know. Suffixes combine:
@@ -13,6 +15,7 @@ to ±0.5 s and every marker a survey error of 20 mm and 1° (σ), which the rig 
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 
 import numpy as np
@@ -173,6 +176,9 @@ REALITIES_CLOCK_S = 0.5  # a drone's video clock can be off by tenths of a secon
 REALITIES_SURVEY = {"position_m": 0.02, "tilt_deg": 1.0}  # riggers' mounting and its survey: 1-2 cm, a degree
 
 
+RANDOM_NAME = re.compile(r"random-\d{1,9}")  # random-SEED: an installation drawn from the seed (sim.installations)
+
+
 def builtin_names() -> list[str]:
     """Names of the built-in scenarios (each also with -weather, -clear and -realities)."""
     return list(BUILTINS)
@@ -194,6 +200,10 @@ def builtin_scenario(name: str, missing_ok: bool = False) -> Scenario | None:
     """A built-in scenario by name, with optional -weather, -clear or -realities suffixes (in any order)."""
     if name in BUILTINS:
         return BUILTINS[name]()
+    if RANDOM_NAME.fullmatch(name):
+        from tracking.sim.installations import random_scenario
+
+        return random_scenario(int(name.removeprefix("random-")))
     for suffix, change in SUFFIXES.items():
         if name.endswith(suffix):
             base = builtin_scenario(name.removesuffix(suffix), missing_ok=True)

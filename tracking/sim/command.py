@@ -22,6 +22,8 @@ from tracking.sim.world import World
 
 MAX_START_OFFSET = 0.5  # s: cameras start up to this late on the common clock
 CLOCK_STREAM = 23  # seed stream of the cameras' clock errors (one generator per camera)
+CAMERA_SURVEY_STREAM = 31  # seed stream of the cameras' survey errors (one generator per camera)
+MOUNTS = {"stern": "vessel", "fixed": "fixed", "drone": "drone"}  # a camera kind's mount in the rig
 TRUTH_RIG_FILE = "truth_rig.yaml"  # the rig with the true clocks and marker poses: for benchmarks, never the tracker
 SCENARIO_FILE = "scenario.yaml"  # written last: a folder holding it is a finished simulation's
 
@@ -126,13 +128,25 @@ def run_simulate(scenario: str, out: Path, seed: int | None = None, duration: fl
     return figures
 
 
+def camera_survey(sc: Scenario, index: int) -> dict:
+    """The rig's surveyed position of camera index (its optical centre at rest, off by a normal draw of its
+    position_sigma per axis) and that σ; empty without a survey."""
+    cam = sc.cameras[index]
+    if cam.position_sigma is None:
+        return {}
+    error = np.random.default_rng([sc.seed, CAMERA_SURVEY_STREAM, index]).normal(0.0, cam.position_sigma, 3)
+    return {"position": (np.array(cam.position) + error).round(4).tolist(), "position_sigma": cam.position_sigma}
+
+
 def write_rigs(sc: Scenario, world: World, out: Path) -> None:
     """The rig the tracker gets (nominal clocks and marker poses) and the true one (TRUTH_RIG_FILE) of a scenario whose
     cameras carry their true time_offset."""
     entries = [CameraEntry(name=c.name, calibration=f"calibration/{c.name}.yaml", source=f"{c.name}.mp4",
-                           time_offset=c.time_offset or 0.0, mount="vessel" if c.kind == "stern" else "drone")
-               for c in sc.cameras]
-    save_rig(out / TRUTH_RIG_FILE, world.rig(entries, true=True))
+                           time_offset=c.time_offset or 0.0, mount=MOUNTS[c.kind], **camera_survey(sc, i))
+               for i, c in enumerate(sc.cameras)]
+    exact = [e.model_copy(update={"position": c.position}) if c.position_sigma else e
+             for e, c in zip(entries, sc.cameras, strict=True)]
+    save_rig(out / TRUTH_RIG_FILE, world.rig(exact, true=True))
     stated = {"time_offset_sigma": round(sc.clock_error_s / np.sqrt(3.0), 6)} if sc.clock_error_s else {}  # uniform
     nominal = [e.model_copy(update={"time_offset": round(e.time_offset - clock_error(sc, i, sc.seed), 6), **stated})
                for i, e in enumerate(entries)]  # what the installation believes its clocks are, and how well

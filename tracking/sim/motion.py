@@ -17,7 +17,8 @@ r = w T / 2 pi, a second-order system of natural period T):
 The topside hangs from the crane hook (a point fixed to the vessel, pendulum_length above the
 topside's centre of gravity): it follows the hook vertically (stiff rigging) and swings as a
 damped pendulum horizontally, with a slow torsional twist about z. Stern cameras move with the
-vessel. Drones hold position with two-stage-filtered Ornstein-Uhlenbeck jitter and wind gusts.
+vessel; fixed cameras (on a platform) do not move. Drones hold position with two-stage-filtered
+Ornstein-Uhlenbeck jitter and wind gusts.
 """
 
 from __future__ import annotations
@@ -229,6 +230,8 @@ class Motion:
         for i, cam in enumerate(scenario.cameras):
             T0 = camera_rest_pose(cam)
             self.T_hold[cam.name] = T0
+            if cam.kind == "fixed":
+                continue
             if cam.kind == "drone":
                 self.drone6[cam.name] = drone_jitter(np.random.default_rng([seed, 3, i]), self.t,
                                                      spec.wind_knots, wind_dir)
@@ -281,7 +284,9 @@ class Motion:
             j = interp_rows(self.drone6[name], t)
             T0 = self.T_hold[name]
             return make_T(T0[:3, :3] @ rotvec_to_R(j[3:]), T0[:3, 3] + j[:3])
-        return self.vessel(t) @ self.T_vessel_camera[name]
+        if name in self.T_vessel_camera:
+            return self.vessel(t) @ self.T_vessel_camera[name]
+        return self.T_hold[name]  # fixed: on a platform, still
 
 
 def camera_rest_pose(cam: CameraSpec) -> np.ndarray:

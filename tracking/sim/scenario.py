@@ -6,6 +6,8 @@ or names a built-in as `base:` and overrides some sections, e.g.::
     base: config2-procedure5
     seed: 7
     weather: {fog: 0.5, rain: 0.3}
+
+or draws a whole installation from a seed (tracking.sim.installations) as `random: 17`, with overrides likewise.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ class CameraSpec(_Model):
     """One camera: where it is, what it looks at, its intrinsics, clock and exposure."""
 
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
-    kind: Literal["stern", "drone"]
+    kind: Literal["stern", "fixed", "drone"]  # on the vessel (rides its motion), on a platform (still), flying
     position: Vec3  # jacket frame, m; stern cameras: with the vessel at rest
     look_at: Vec3  # jacket frame, m
     roll: float = 0.0  # degrees about the optical axis
@@ -51,6 +53,8 @@ class CameraSpec(_Model):
     exposure: float = Field(1 / 250, gt=0, le=0.1)  # s; motion blur integrates over it
     time_offset: float | None = Field(None, ge=0)  # s, common-clock time of PTS 0; None: drawn from seed
     drop_rate: float = Field(0.0, ge=0, le=0.5)  # probability that a frame is lost (drones)
+    position_sigma: float | None = Field(None, gt=0, le=10)  # m: the rig states the camera's position as surveyed to
+    # this σ (the survey's error drawn from the seed); None: no survey
 
     @field_validator("K")
     @classmethod
@@ -80,6 +84,8 @@ class PairSpec(_Model):
     face: FaceName
     jacket_id: int = Field(ge=0)
     topside_id: int = Field(ge=0)
+    jacket_tilt_deg: Vec3 = [0.0, 0.0, 0.0]  # the jacket marker mounted off its face's plumb pose by this rotation
+    topside_tilt_deg: Vec3 = [0.0, 0.0, 0.0]  # vector (degrees, body frame, about its centre); surveyed: the rig has it
 
 
 class SeaSpec(_Model):
@@ -247,7 +253,16 @@ def load_scenario(scenario: str | Path) -> Scenario:
         raise InputError(path, "no such file and no such built-in scenario "
                          f"(built-ins: {', '.join(builtin_names())})")
     data = read_yaml(path)
-    if isinstance(data, dict) and "base" in data:
+    if isinstance(data, dict) and "random" in data:
+        from tracking.sim.installations import random_scenario
+
+        seed = data.pop("random")
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise InputError(path, f"expected a whole number ≥ 0, the installation's seed (got {seed!r})", "random")
+        if "base" in data:
+            raise InputError(path, "give random or base, not both", "random")
+        data = deep_merge(random_scenario(seed).model_dump(mode="json"), data)
+    elif isinstance(data, dict) and "base" in data:
         base_name = data.pop("base")
         base = builtin_scenario(str(base_name), missing_ok=True)
         if base is None:

@@ -53,11 +53,15 @@ class World:
                                                   vessel_body(self.layout))
         self.textures: dict[str, Texture] = {}
         self.T_body_marker: dict[int, np.ndarray] = {}  # (4, 4) where each marker truly is in its body's frame
+        self.T_surveyed: dict[int, np.ndarray] = {}  # (4, 4) where the survey puts each marker (its stated tilt)
         for pair in scenario.pairs:
-            for body, mid in ((self.jacket, pair.jacket_id), (self.topside, pair.topside_id)):
+            for body, mid, tilt in ((self.jacket, pair.jacket_id, pair.jacket_tilt_deg),
+                                    (self.topside, pair.topside_id, pair.topside_tilt_deg)):
                 plate = marker_plate(self.layout, mid, body.name, pair.cone, pair.face, scenario.marker_size)
-                moved, turned = survey_error(scenario, seed, mid)
                 T = plate.T_body_plate
+                T = make_T(rotvec_to_R(np.radians(tilt)) @ T[:3, :3], T[:3, 3])  # mounted off plumb, surveyed
+                self.T_surveyed[mid] = T
+                moved, turned = survey_error(scenario, seed, mid)
                 plate.T_body_plate = make_T(rotvec_to_R(turned) @ T[:3, :3], T[:3, 3] + moved)
                 self.T_body_marker[mid] = plate.T_body_plate
                 attach_plates(body, [plate])
@@ -120,9 +124,11 @@ class World:
         """Markers as the rig file lists them."""
         out = []
         for p in self.scenario.pairs:
-            for body, mid in (("jacket", p.jacket_id), ("topside", p.topside_id)):
+            for body, mid, tilt in (("jacket", p.jacket_id, p.jacket_tilt_deg),
+                                    ("topside", p.topside_id, p.topside_tilt_deg)):
                 c = self.layout.marker_center(p.cone, p.face, body)
-                out.append(Marker(id=mid, body=body, cone=p.cone, face=p.face, center=c.round(6).tolist()))
+                R = {"R": self.T_surveyed[mid][:3, :3].round(9).tolist()} if any(tilt) else {}  # off plumb, surveyed
+                out.append(Marker(id=mid, body=body, cone=p.cone, face=p.face, center=c.round(6).tolist(), **R))
         return out
 
     def true_markers(self) -> list[Marker]:
