@@ -149,6 +149,14 @@ def find_quads(detector: cv2.aruco.ArucoDetector, image: np.ndarray
     return quads, ids.reshape(-1).astype(int), list(rejected)
 
 
+def destreaked(gray: np.ndarray, opened: np.ndarray) -> np.ndarray:
+    """(H, W) frame with its bright streaks (pixels RAIN_STREAK_LEVELS above the grey opening) taken from the opening
+    and every other pixel as it was. The whole opening would also erase the rain, but on a noisy edge its minimum then
+    maximum reads the marker smaller: 1.9 ‰ at a contrast of 70 grey levels with noise of 2 (3.2 ‰ at 40), which at
+    4 m between a pair's markers is 8-13 mm of height."""
+    return np.where(cv2.subtract(gray, opened) > RAIN_STREAK_LEVELS, opened, gray)
+
+
 def detections(quads: np.ndarray, ids: np.ndarray, rejected: list[np.ndarray]) -> Detections:
     """Detections sorted by id from quads (B, 4, 2), ids (B,) and rejected candidates."""
     markers = sorted((MarkerDetection(id=int(i), corners=q) for q, i in zip(quads, ids, strict=True)),
@@ -192,7 +200,8 @@ class MarkerDetector:
     def refine(self, gray: np.ndarray, opened: np.ndarray | None, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Edge-fit corners (B, 4, 2) and which fits succeeded (B,) (failures keep their corners).
 
-        On the rain-filtered image where the marker's cells are wide enough to survive it.
+        Where the marker's cells are wide enough to survive the rain filter, on the frame with its rain streaks
+        replaced by the filtered image (destreaked).
         """
         cells = self.dictionary.markerSize + 2
         blur_model = self.refinement == Refinement.BLURRED
@@ -201,7 +210,7 @@ class MarkerDetector:
         side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
         big = side / cells >= RAIN_REFINE_MIN_CELL_PX
         out, ok = quads.copy(), np.zeros(len(quads), dtype=bool)
-        for mask, image in ((big, opened), (~big, gray)):
+        for mask, image in ((big, destreaked(gray, opened) if big.any() else gray), (~big, gray)):
             if mask.any():
                 out[mask], ok[mask] = refine_corners_batch(image, quads[mask], self.camera, cells, blur_model)
         return out, ok

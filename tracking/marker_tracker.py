@@ -24,6 +24,7 @@ from tracking.detection import (
     RAIN_REFINE_MIN_CELL_PX,
     Detections,
     MarkerDetector,
+    destreaked,
     detections,
     detector_parameters,
     find_quads,
@@ -352,9 +353,9 @@ class MarkerTracker:
                           opened_crops: list[tuple[Roi, np.ndarray]]) -> np.ndarray | None:
         """One (H, W) image to fit every marker's edges on, valid around the markers, or None to use MarkerDetector's.
 
-        Around markers whose cells survive the rain filter it is the rain-filtered frame, around
-        the others the frame itself, as MarkerDetector.refine chooses; one image means one
-        vectorised edge fit per frame. None when there is nothing to filter or the regions touch.
+        Around markers whose cells survive the rain filter it is the frame with its rain streaks taken from the
+        rain-filtered one (destreaked), around the others the frame itself, as MarkerDetector.refine chooses; one
+        image means one vectorised edge fit per frame. None when there is nothing to filter or the regions touch.
         """
         cells = self.detector.dictionary.markerSize + 2
         sides = np.array([quad_side(q) for q in quads])
@@ -375,16 +376,17 @@ class MarkerTracker:
             if not is_big:
                 image[window] = gray[window]
             elif opened_full is not None:
-                image[window] = opened_full[window]
+                image[window] = destreaked(gray[window], opened_full[window])
             else:
                 src = next((c for c in opened_crops if c[0].contains_box(r, pad)), None)
                 if src is not None:
                     roi, crop = src
-                    image[window] = crop[r.y0 - roi.y0:r.y1 - roi.y0, r.x0 - roi.x0:r.x1 - roi.x0]
+                    image[window] = destreaked(gray[window], crop[r.y0 - roi.y0:r.y1 - roi.y0,
+                                                                   r.x0 - roi.x0:r.x1 - roi.x0])
                 else:
                     y0, x0 = max(r.y0 - pad, 0), max(r.x0 - pad, 0)
                     crop = self.detector.opening(gray[y0:r.y1 + pad, x0:r.x1 + pad])
-                    image[window] = crop[r.y0 - y0:r.y1 - y0, r.x0 - x0:r.x1 - x0]
+                    image[window] = destreaked(gray[window], crop[r.y0 - y0:r.y1 - y0, r.x0 - x0:r.x1 - x0])
         return image
 
     def _update(self, result: Detections, rain: dict[int, bool]) -> None:
