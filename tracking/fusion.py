@@ -49,10 +49,20 @@ from statistics import NormalDist
 import cv2
 import numpy as np
 
-from tracking.filtering import WITHHELD_CLOCKS, WITHHELD_SIGMA, ConeEstimate, paper_filter, raw_estimates
+from tracking.filtering import (
+    WITHHELD_BELOW,
+    WITHHELD_CLOCKS,
+    WITHHELD_SCALE,
+    WITHHELD_SIGMA,
+    ConeEstimate,
+    paper_filter,
+    raw_estimates,
+)
 from tracking.offsets import MAX_PAIR_TILT_RAD, BodyObservation, PairOffset, body_geometry
+from tracking.placement import DECISIVE_CHI2, LEVEL_SIGMA_RAD, SAME_OPTION_CHI2, Hypotheses, rotation_angle
 from tracking.pose import BodyPose, Choice, body_object_points
 from tracking.rig import Rig
+from tracking.scale import ScaleEvidence, below_cones, survey_sample
 
 STATE = 12  # per body: pose (6) and rates (6)
 GATE_CHI2 = {3: 16.27, 6: 22.46}  # by degrees of freedom, 99.9 %
@@ -89,8 +99,6 @@ GAUSSIAN_MEDIAN_CHI2_1 = 0.4549  # median of a χ² variable with 1 degree of fr
 PLACEMENT_GAIN = 25.0  # σ × 5 on the pose that first places a camera: it only linearises; the same frame's corners,
 # applied right after, carry its information (else counted twice)
 CORNER_GATE_CHI2 = 26.12  # 8 degrees of freedom (a marker's four corners), 99.9 %
-PLACEMENT_MISFIT_RATIO = 3.0  # an ambiguous lone jacket marker is settled by the topside's corners only when one IPPE
-# option fits them this many times better (squared pixels) than the other; a near tie waits for another view
 TOPSIDE_PLACEMENT_M = 1.0  # σ of the topside's position when a single view first places it
 PLACEMENT_FIT_P = 0.99  # a view places a camera or the topside only if its pose fits its corners as well as
 # CORNER_NOISE_PX would at this probability (χ² of the RMS over 8 N - 6 degrees of freedom, N markers)
@@ -286,6 +294,16 @@ def _from_params(p: np.ndarray) -> np.ndarray:
     return T
 
 
+def between(poses: list[np.ndarray]) -> np.ndarray:
+    """(4, 4) the pose midway between poses (4, 4) close to each other: mean rotation vector about the first, mean
+    translation."""
+    R_0 = poses[0][:3, :3]
+    T = np.eye(4)
+    T[:3, :3] = rotation(np.mean([rotvec(P[:3, :3] @ R_0.T) for P in poses], axis=0)) @ R_0
+    T[:3, 3] = np.mean([P[:3, 3] for P in poses], axis=0)
+    return T
+
+
 def _numeric_jacobian(f: Callable[[np.ndarray], np.ndarray], x0: np.ndarray) -> np.ndarray:
     """(M, N) forward-difference Jacobian of f at x0 (N,)."""
     base = f(x0)
@@ -338,6 +356,9 @@ class CameraState:
     consecutive_rejects: int = 0
     motion: CameraMotionLevel = field(default_factory=lambda: CameraMotionLevel())
     motion_scale: float = 1.0  # share of its mount's process noise the camera gets (1 until its level is known)
+    hypotheses: Hypotheses | None = None  # while an ambiguous jacket view waits: its options and their evidence
+    waiting: str = "no frame of it yet"  # why it is not placed (empty once placed)
+    placed_at: float | None = None  # capture time of its (last) placement, s
 
 
 @dataclass
@@ -468,6 +489,9 @@ class TopsideFilter:
         self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}  # s, from the rig
         self.surveys = {c.name: (np.array(c.position, dtype=float), float(c.position_sigma)) for c in self.rig.cameras
                         if c.position is not None and c.position_sigma is not None}  # camera -> (position (3,), σ m)
+        self.scale = ScaleEvidence()  # whether the markers look the size the rig states (tracking.scale)
+        self.below: tuple[int, float] = (0, 0.0)  # estimates withheld for putting the topside through its cones, and
+        # the deepest of their Δz (m)
 
     @property
     def size(self) -> int:
@@ -693,54 +717,133 @@ class TopsideFilter:
             H[:, s + 3:s + 6] = np.eye(3)
 
     def _place_camera(self, cam: CameraState, o: BodyObservation) -> bool:
-        """First view of the jacket: the camera's pose from it; an ambiguous one settled by the topside's corners."""
+        """First view of the jacket: the camera's pose from it; an ambiguous one settled by the evidence (placement)."""
         jb = o.jacket
         assert jb is not None
         assert self.x is not None
         if not fits_its_corners(jb):
+            cam.waiting = "its jacket view does not fit its corners (a corner off by rain or glare?)"
             return False  # a corner off: wait for a clean view
         options = [(jb.T_camera_body, jb.covariance), *jb.alternatives]
         gain = 1.0
-        if jb.choice != Choice.UNIQUE:
-            seen = [i for i in o.corners if i in self.topside_corners]
-            assert self.P is not None
-            settled = self.topside_placed and np.sqrt(np.diag(self.P)[:3]).max() <= REPORT_MAX_SIGMA_M
-            if settled and seen:  # the option that puts the topside's corners where they are
-                def misfit(T_cj: np.ndarray) -> float:
-                    cam.T_jacket_camera = inverse(T_cj)
-                    zero = self.x.copy()
-                    zero[cam.index:cam.index + 6] = 0.0
-                    return sum(float(np.sum((self._predict_corners(cam, i, zero, o.K) - o.corners[i].reshape(-1))
-                                            ** 2)) for i in seen)
-                misfits = [misfit(T) for T, _ in options]
-                cam.T_jacket_camera = None
-                k = int(np.argmin(misfits))
-                if any(f < PLACEMENT_MISFIT_RATIO * misfits[k] for j, f in enumerate(misfits) if j != k):
-                    return False  # the topside's corners cannot tell the options apart: wait
-            elif o.topside is not None:  # until then: the only option under which the topside hangs near level
-                tilts = [min(float(np.linalg.norm(rotvec(T[:3, :3].T @ T_ct[:3, :3]))) for T_ct in
-                             [o.topside.T_camera_body, *(a for a, _ in o.topside.alternatives)]) for T, _ in options]
-                level = [k for k, tilt in enumerate(tilts) if tilt <= MAX_PAIR_TILT_RAD]
-                if len(level) != 1:
+        if jb.choice != Choice.UNIQUE and len(options) > 1:
+            if self._one_option(options):  # near square on: the options straddle the true pose within their σ
+                options = [(between([T for T, _ in options]), options[0][1])]
+            else:
+                k = self._settle(cam, o, options)
+                if k is None:
                     return False
-                k = level[0]
-            else:  # wait for a view that settles it
-                return False
-            options = [options[k]]
+                options = [options[k]]
             gain = AMBIGUOUS_VARIANCE_GAIN
         T_cj, cov = options[0]
-        cov = gain * PLACEMENT_GAIN * cov
+        cov_jc = self._camera_covariance(T_cj, cov)
+        cam.T_jacket_camera = inverse(T_cj)
+        floor = np.diag([ROTATION_FLOOR_RAD**2] * 3 + [MEASUREMENT_FLOOR_M**2] * 3)
+        self._reset_camera(cam, gain * PLACEMENT_GAIN * cov_jc + floor)
+        self._apply_survey(cam, gain * cov_jc[3:, 3:] + floor[3:, 3:])
+        cam.hypotheses, cam.waiting, cam.placed_at = None, "", o.time
+        return True
+
+    def _one_option(self, options: list[tuple[np.ndarray, np.ndarray]]) -> bool:
+        """Whether an ambiguous view's options place the camera within each other's σ (a view near square on): then
+        either places it, and its covariance (AMBIGUOUS_VARIANCE_GAIN) holds the other."""
+        (T_0, cov_0), rest = options[0], options[1:]
+        p_0, S_0 = inverse(T_0)[:3, 3], self._camera_covariance(T_0, cov_0)[3:, 3:]
+        for T, cov in rest:
+            d = inverse(T)[:3, 3] - p_0
+            if float(d @ np.linalg.solve(S_0 + self._camera_covariance(T, cov)[3:, 3:], d)) > SAME_OPTION_CHI2:
+                return False
+        return True
+
+    @staticmethod
+    def _camera_covariance(T_cj: np.ndarray, cov: np.ndarray) -> np.ndarray:
+        """(6, 6) covariance of a camera's error state (δθ, δp, jacket frame) placed by T_camera_jacket (4, 4) with the
+        covariance (6, 6) of its (rvec, tvec)."""
         T_jc = inverse(T_cj)
 
         def camera_error(p: np.ndarray) -> np.ndarray:
             return pose_residual(inverse(_from_params(p)), T_jc)
 
         J = _numeric_jacobian(camera_error, _pose_params(T_cj))
-        cam.T_jacket_camera = T_jc
-        floor = np.diag([ROTATION_FLOOR_RAD**2] * 3 + [MEASUREMENT_FLOOR_M**2] * 3)
-        self._reset_camera(cam, J @ cov @ J.T + floor)
-        self._apply_survey(cam, (J @ cov @ J.T)[3:, 3:] / PLACEMENT_GAIN + floor[3:, 3:])
-        return True
+        return J @ cov @ J.T
+
+    def _settle(self, cam: CameraState, o: BodyObservation, options: list[tuple[np.ndarray, np.ndarray]]
+                ) -> int | None:
+        """Which of an ambiguous jacket view's options places the camera, once the evidence decides (the module
+        tracking.placement); None until then, with the reason in cam.waiting."""
+        assert self.x is not None and self.P is not None
+        positions = [inverse(T)[:3, 3] for T, _ in options]
+        h = cam.hypotheses
+        order = h.match(positions) if h is not None else None
+        if h is None or order is None:  # the first ambiguous view, or options no longer those kept: start again
+            h = cam.hypotheses = Hypotheses.start(positions, o.time)
+            order = list(range(len(options)))
+        for j, k in enumerate(order):
+            h.positions[k] = positions[j]
+        sigma2 = CORNER_NOISE_PX**2 + VIEW_BIAS_PX**2  # a corner's error in one frame, noise and view bias
+
+        def chi2(values: list[float]) -> np.ndarray:  # per hypothesis, from per frame option
+            out = np.zeros(len(h.positions))
+            for j, v in enumerate(values):
+                out[order[j]] = v
+            return out
+
+        zero = self.x.copy()
+        zero[cam.index:cam.index + 6] = 0.0
+        jacket = [i for i in o.corners if i in self.jacket_corners]
+        topside = [i for i in o.corners if i in self.topside_corners] if self.topside_placed else []
+        misfits, distances = [], []
+        for T_cj, cov in options:
+            cam.T_jacket_camera = inverse(T_cj)
+            misfits.append(sum(float(np.sum((self._predict_corners(cam, i, zero, o.K) - o.corners[i].reshape(-1))
+                                            ** 2)) for i in jacket) / sigma2)
+            if topside:
+                distances.append(self._topside_distance(cam, o, topside, self._camera_covariance(T_cj, cov), sigma2))
+        cam.T_jacket_camera = None
+        h.add(chi2(misfits), o.time, "its jacket corners")
+        if topside:
+            h.add(chi2(distances), o.time, "the topside's corners")
+        elif o.topside is not None and not self.topside_placed:  # the topside hangs near level under the right one
+            tilts = [min(float(np.linalg.norm(rotvec(T[:3, :3].T @ T_ct[:3, :3]))) for T_ct in
+                         [o.topside.T_camera_body, *(a for a, _ in o.topside.alternatives)]) for T, _ in options]
+            h.add(chi2([(t / LEVEL_SIGMA_RAD) ** 2 for t in tilts]), o.time, "the topside's tilt")
+        if cam.name in self.surveys and not h.surveyed:
+            position, sigma = self.surveys[cam.name]
+            h.add(chi2([float((p - position) @ np.linalg.solve(
+                sigma**2 * np.eye(3) + self._camera_covariance(T, cov)[3:, 3:], p - position))
+                for p, (T, cov) in zip(positions, options, strict=True)]), o.time, "its surveyed position", once=True)
+            h.surveyed = True
+        h.step(o.time)
+        k = h.decided()
+        if k is None:
+            apart = np.degrees(rotation_angle(options[0][0][:3, :3], options[1][0][:3, :3]))
+            marker = o.jacket.marker_ids[0] if o.jacket is not None else "?"
+            cam.waiting = (f"its view of jacket marker {marker} is ambiguous (two poses {apart:.0f}° apart fit its "
+                           f"corners alike); {', '.join(sorted(h.sources))} tell them apart by χ² {h.margin:.1f} of "
+                           f"{DECISIVE_CHI2:g} so far")
+            return None
+        return order.index(k)
+
+    def _topside_distance(self, cam: CameraState, o: BodyObservation, markers: list[int], camera_cov: np.ndarray,
+                          sigma2: float) -> float:
+        """Mahalanobis distance of a frame's topside corners from their prediction through a tentatively placed camera
+        (cam.T_jacket_camera, its error state zero, covariance (6, 6) camera_cov) and the topside's state."""
+        assert self.x is not None and self.P is not None
+        saved = self.x[cam.index:cam.index + 6].copy()
+        self.x[cam.index:cam.index + 6] = 0.0
+        columns = [*range(6), *range(cam.index, cam.index + 6)]
+        ys, Js = [], []
+        for i in markers:
+            h_i, J_i = self.corner_jacobian(cam, i, o.K, columns)
+            ys.append(o.corners[i].reshape(-1) - h_i)
+            Js.append(J_i)
+        self.x[cam.index:cam.index + 6] = saved
+        y, J = np.concatenate(ys), np.vstack(Js)
+        P = np.zeros((12, 12))
+        P[:6, :6] = self.P[:6, :6]
+        P[6:, 6:] = camera_cov
+        S = J @ P @ J.T + sigma2 * np.eye(len(y))
+        return float(y @ np.linalg.solve(S, y))
 
     def _apply_survey(self, cam: CameraState, placed: np.ndarray) -> None:
         """The camera's surveyed position as a measurement of its just placed pose, gated against the placement's own
@@ -853,6 +956,28 @@ class TopsideFilter:
         self._apply(H, np.concatenate(ys), R)
         return True
 
+    def _measure_scale(self, o: BodyObservation) -> None:
+        """A frame's evidence of the markers' size: two markers of one body in it, and a surveyed camera's distance to
+        its jacket marker (the same for both IPPE options)."""
+        for sample in o.scale:
+            self.scale.add(sample, o.time)
+        if o.camera not in self.surveys or o.jacket is None:
+            return
+        position, sigma = self.surveys[o.camera]
+        T, cov = o.jacket.T_camera_body, o.jacket.covariance
+        for i in o.jacket.marker_ids:
+            c = self.centres[i]
+
+            def distance(p: np.ndarray, c: np.ndarray = c) -> np.ndarray:
+                return np.array([np.linalg.norm(rotation(p[:3]) @ c + p[3:])])
+
+            p0 = _pose_params(T)
+            J = _numeric_jacobian(distance, p0)
+            sample = survey_sample(o.camera, i, float(distance(p0)[0]), float(np.sqrt(J @ cov @ J.T)[0, 0]),
+                                   float(np.linalg.norm(position - c)), sigma)
+            if sample is not None:
+                self.scale.add(sample, o.time)
+
     def clock_bound(self, cameras: tuple[str, ...]) -> float:
         """σ, s, of the time an estimate resting on these cameras (all when none) is the topside's: the largest of their
         clocks' (rig: time_offset_sigma), a bound whatever their weights and signs. Weighing each camera by its share
@@ -870,8 +995,12 @@ class TopsideFilter:
         cam = self.cameras.get(o.camera)
         if cam is None:
             return False
+        self._measure_scale(o)
         if cam.T_jacket_camera is None:
-            if o.jacket is None or not self._place_camera(cam, o):
+            if o.jacket is None:
+                cam.waiting = "no jacket marker of the rig in its view (a camera is placed by the jacket's markers)"
+                return False
+            if not self._place_camera(cam, o):
                 return False
         if not self.topside_placed:
             if o.topside is None or not self._place_topside(cam, o.topside):
@@ -887,6 +1016,7 @@ class TopsideFilter:
             cam.consecutive_rejects = 0 if used_jacket else cam.consecutive_rejects + 1
             if cam.consecutive_rejects >= REINIT_AFTER_REJECTS:  # lost: place it again at its next view
                 cam.T_jacket_camera = None
+                cam.waiting = f"lost: its jacket corners were refused {REINIT_AFTER_REJECTS} frames in a row"
                 self._reset_camera(cam)
         if o.topside is not None and self.topside_placed and not used_topside:
             self.consecutive_rejects += 1
@@ -932,9 +1062,15 @@ class TopsideFilter:
                 speed, rates = H[:, :6] @ x[6:STATE], H[:, :6] @ P[6:STATE, 6:STATE] @ H[:, :6].T
                 cov = cov + clock**2 * (np.outer(speed, speed) + rates)
             withheld = ""
-            if np.sqrt(np.diag(cov)).max() > limit:  # withheld; the clocks' fault when exact clocks would have shown it
+            offset = H @ x[:STATE]
+            if self.scale.mismatch:  # a rig error: every offset scaled
+                withheld = WITHHELD_SCALE
+            elif below_cones(float(offset[2]), float(np.sqrt(cov[2, 2]))):  # no set-down can be there: a rig error
+                withheld = WITHHELD_BELOW
+                self.below = (self.below[0] + 1, min(self.below[1], float(offset[2])))
+            elif np.sqrt(np.diag(cov)).max() > limit:  # the clocks' fault when exact clocks would have shown it
                 withheld = WITHHELD_CLOCKS if np.sqrt(np.diag(timed)).max() <= limit else WITHHELD_SIGMA
-            offset = np.full(3, np.nan) if withheld else H @ x[:STATE]
+            offset = np.full(3, np.nan) if withheld else offset
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))
         return out
 
@@ -960,12 +1096,32 @@ def preferred(group: list[Measurement]) -> list[Measurement]:
     return observations or group
 
 
-def fused_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: FilterTuning | None = None
-                    ) -> Iterator[ConeEstimate]:
-    """Live: after each frame with measurements, the filtered offset at every cone."""
+@dataclass
+class FilterReport:
+    """What a run of the filter found besides its estimates, taken when the run ends: the cameras it never placed and
+    why (each camera's CameraState.waiting), the markers' size against the rig's (tracking.scale), and the offsets it
+    withheld for putting the topside through its cones."""
+
+    unplaced: dict[str, str] = field(default_factory=dict)
+    scale: ScaleEvidence = field(default_factory=ScaleEvidence)
+    below: tuple[int, float] = (0, 0.0)  # estimates withheld as the topside through its cones, and the deepest Δz, m
+
+    def take(self, kf: TopsideFilter) -> None:
+        """The findings of a filter at the end of its run."""
+        self.unplaced = {name: cam.waiting for name, cam in kf.cameras.items() if cam.placed_at is None}
+        self.scale = kf.scale
+        self.below = kf.below
+
+
+def fused_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: FilterTuning | None = None,
+                    report: FilterReport | None = None) -> Iterator[ConeEstimate]:
+    """Live: after each frame with measurements, the filtered offset at every cone; report, when given, gets the
+    run's findings at its end."""
     kf = TopsideFilter(rig, tuning or FilterTuning())
     for group in _frames(measurements):
         yield from filter_frame(kf, group)
+    if report is not None:
+        report.take(kf)
 
 
 def filter_frame(kf: TopsideFilter, group: list[Measurement]) -> list[ConeEstimate]:
@@ -978,7 +1134,8 @@ def filter_frame(kf: TopsideFilter, group: list[Measurement]) -> list[ConeEstima
 
 
 def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: FilterTuning | None = None,
-                       span_s: float = SMOOTHER_SPAN_S, lag_s: float = SMOOTHER_LAG_S) -> Iterator[ConeEstimate]:
+                       span_s: float = SMOOTHER_SPAN_S, lag_s: float = SMOOTHER_LAG_S,
+                       report: FilterReport | None = None) -> Iterator[ConeEstimate]:
     """Recorded: the filter forward, then Rauch-Tung-Striebel passes backward; the offset at every cone, in time order.
 
     The backward pass runs whenever the kept steps span span_s + lag_s: from the newest step back, it gives the steps
@@ -1003,6 +1160,8 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
             if steps[-1].time - steps[0].time >= span_s + lag_s:
                 yield from _smooth_back(kf, steps, steps[-1].time - lag_s)
     yield from _smooth_back(kf, steps, np.inf)
+    if report is not None:
+        report.take(kf)
 
 
 def _smooth_back(kf: TopsideFilter, steps: list[FilterStep], until: float) -> Iterator[ConeEstimate]:
@@ -1031,9 +1190,9 @@ def _pair_offsets(measurements: Iterable[Measurement]) -> Iterator[PairOffset]:
     return (m for m in measurements if isinstance(m, PairOffset))
 
 
-ESTIMATORS: dict[str, Callable[[Rig, Iterable[Measurement]], Iterable[ConeEstimate]]] = {
+ESTIMATORS: dict[str, Callable[..., Iterable[ConeEstimate]]] = {  # (rig, measurements, report=None)
     "fused": fused_estimates,  # live, the default
     "smoothed": smoothed_estimates,  # recorded runs
-    "paper": lambda rig, measurements: paper_filter(rig, _pair_offsets(measurements)),  # the paper's method
-    "raw": lambda rig, measurements: raw_estimates(_pair_offsets(measurements)),  # every camera's pair offset
+    "paper": lambda rig, measurements, report=None: paper_filter(rig, _pair_offsets(measurements)),  # the paper's
+    "raw": lambda rig, measurements, report=None: raw_estimates(_pair_offsets(measurements)),  # each pair offset
 }
