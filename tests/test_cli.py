@@ -231,3 +231,44 @@ def test_recover_an_intact_archive_writes_nothing(installation: Path, tmp_path: 
     assert "nothing to recover" in proc.stdout and ": OK;" in proc.stdout
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o.csv", "run.mcap"]
     assert archive.read_bytes() == before
+
+
+def changed_rig(installation: Path, folder: Path, **changes) -> Path:
+    """The installation's rig with some top-level fields changed (and its camera paths absolute), in folder."""
+    data = yaml.safe_load((installation / "rig.yaml").read_text())
+    for cam in data["cameras"]:
+        cam["source"], cam["calibration"] = str(installation / cam["source"]), str(installation / cam["calibration"])
+    cameras = changes.pop("cameras", {})
+    for cam in data["cameras"]:
+        cam.update(cameras.get(cam["name"], {}))
+    data.update(changes)
+    (folder / "rig.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    return folder / "rig.yaml"
+
+
+def test_track_names_a_wrong_marker_size(installation: Path, tmp_path: Path) -> None:
+    """The plate's side (1.5 m) entered for the 1 m black square, with one camera's position surveyed: track names the
+    marker size in one line, exits 2, and keeps the offsets it wrote with none shown. Without the survey nothing fixes
+    the scale, and it says so."""
+    truth = pd.read_csv(installation / "truth.csv").iloc[0]
+    eye = [float(truth[f"camera_cam-ahead_{a}"]) for a in "xyz"]
+    rig = changed_rig(installation, tmp_path, marker_size=1.5,
+                      cameras={"cam-ahead": {"position": eye, "position_sigma": 0.05}})
+    out = tmp_path / "offsets.csv"
+    proc = run("track", "--rig", rig, "-o", out)
+    assert_one_line_error(proc, "marker_size", "0.67× their stated size", "black square's side")
+    df = pd.read_csv(out)
+    assert len(df) and df["dx"].isna().all() and set(df["withheld"].dropna()) <= {"rig error: marker size"}
+    plain = run("track", "--rig", installation / "rig.yaml", "-o", tmp_path / "plain.csv")
+    assert plain.returncode == 0 and "nothing fixes the scale" in plain.stderr
+
+
+def test_track_refuses_the_topside_through_its_cones(installation: Path, tmp_path: Path) -> None:
+    """A marker size half the real one puts the topside about 0.9 m below its cone: those offsets are withheld as a rig
+    error, named in one line, exit 2."""
+    rig = changed_rig(installation, tmp_path, marker_size=0.5)
+    out = tmp_path / "offsets.csv"
+    proc = run("track", "--rig", rig, "-o", out)
+    assert_one_line_error(proc, "marker_size", "below its cone tips")
+    df = pd.read_csv(out)
+    assert (df["withheld"] == "rig error: through the cones").any() and not (df["dz"] < -0.1).any()

@@ -18,11 +18,16 @@ One CheckReport gathers it (check_rig builds it; the CLI prints it and may recor
 - per cone, its σ as the fusion filter (tracking.fusion.TopsideFilter) has it after those seconds, and a verdict:
   ``blind`` (no camera sees a topside marker at it and its σ exceeds the report limit: it would show NO DATA),
   ``weak`` (σ above READY_MAX_SIGMA_M, or above the report limit although seen, or measured by one camera only) or
-  ``ready``.
+  ``ready``;
+- per camera the filter never placed, why (tracking.fusion: no jacket marker in view, an ambiguous view nothing has
+  settled yet, corners that do not fit) and so what would let it be placed;
+- the markers' size against marker_size (tracking.scale), from cameras that see two markers of one body or have a
+  surveyed position; a warning when nothing fixes the scale; an offset that puts the topside through its cones.
 
 Exit status of `topside check`: 0 when every cone is ready and nothing disagrees (CheckReport.ready), 1 otherwise
-(a weak or blind cone, a marker that disagrees with the rig, a camera that sees no marker of the rig, a clock off its
-rate, a survey its markers refute, or an id the rig does not list while a rig marker is never seen), 2 for bad input.
+(a weak or blind cone, a marker that disagrees with the rig, a camera that sees no marker of the rig or is never
+placed, a clock off its rate, a survey its markers refute, markers that do not look their stated size, the topside
+through its cones, or an id the rig does not list while a rig marker is never seen), 2 for bad input.
 """
 
 from __future__ import annotations
@@ -40,13 +45,22 @@ import numpy as np
 from tracking.camera import CameraModel
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
-from tracking.filtering import ConeEstimate
-from tracking.fusion import REPORT_MAX_SIGMA_M, VIEW_BIAS_TAU_S, TopsideFilter, cone_points, filter_frame
+from tracking.filtering import WITHHELD_BELOW, ConeEstimate
+from tracking.fusion import (
+    REPORT_MAX_SIGMA_M,
+    STATE,
+    VIEW_BIAS_TAU_S,
+    TopsideFilter,
+    cone_points,
+    filter_frame,
+    point_offset_matrix,
+)
 from tracking.images import Frame, VideoHealth
 from tracking.offsets import MAX_PAIR_TILT_RAD, BodyObservation, PairOffset
 from tracking.pipeline import CameraTracker, FrameResult
 from tracking.pose import BodyPose, MarkerPose, estimate_body_pose
 from tracking.rig import Rig
+from tracking.scale import ScaleEvidence
 from tracking.sources import Pacer, camera_frames
 
 DEFAULT_SECONDS = 5.0  # a few seconds of each camera: enough for the filter to settle a still installation's σ
@@ -165,6 +179,7 @@ class CameraCheck:
     survey_conflict: bool = False  # the filter refused the survey as beyond its σ
     first_frame: Frame | None = None  # its first frame (for the recording)
     model: CameraModel | None = None  # its calibration (sized by the first frame when the file gave no size)
+    unplaced: str = ""  # why the fusion filter never placed it (tracking.fusion CameraState.waiting); empty: placed
 
     @property
     def problems(self) -> list[str]:
@@ -172,6 +187,8 @@ class CameraCheck:
         out = [f"{self.camera}: clock {p}" for p in self.clock.problems]
         if not self.sights:
             out.append(f"{self.camera}: sees no marker of the rig in {self.clock.frames} frames")
+        elif self.unplaced:
+            out.append(f"{self.camera}: never placed, so none of its frames is used: {self.unplaced}")
         if self.survey_conflict:
             out.append(f"{self.camera}: its surveyed position is {self.survey_m:.2f} m from where its markers place "
                        "it, beyond the survey's σ (position or position_sigma wrong?); not used")
@@ -189,6 +206,9 @@ class CheckReport:
     cones: list[ConeCheck]
     warnings: list[str] = field(default_factory=list)  # one line each (a calibration's size taken from a frame)
     T_jacket_topside: np.ndarray | None = None  # (4, 4) where the filter has the topside at the end
+    scale: ScaleEvidence = field(default_factory=ScaleEvidence)  # whether the markers look their stated size
+    below: dict[str, float] = field(default_factory=dict)  # cone -> Δz (m) of an offset that puts the topside
+    # through its cones (a rig error: tracking.scale.below_cones)
 
     @property
     def unseen_markers(self) -> list[int]:
@@ -212,7 +232,10 @@ class CheckReport:
 
     def problems(self) -> list[str]:
         """One line per finding that makes the rig not ready (empty: ready)."""
-        out = [p for c in self.cameras for p in c.problems]
+        out = [f"marker_size: {self.scale.message()}"] if self.scale.mismatch else []
+        out += [f"cone {cone}: the offset puts the topside {-dz:.2f} m below its cone tip, where no set-down can be: "
+                "marker_size, a marker's centre or a pair's mated offset is wrong" for cone, dz in self.below.items()]
+        out += [p for c in self.cameras for p in c.problems]
         out += [f"{d.camera}: {d.reason}" for d in self.disagreements]
         if self.unseen_markers and self.unknown_ids:
             ids = ", ".join(f"{i} ({', '.join(cams)})" for i, cams in self.unknown_ids.items())
@@ -671,8 +694,10 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
         filtered = placed.get(name)
         T_jacket_camera, T_jacket_markers = camera_placement(run.results, None if filtered is None
                                                              else np.asarray(filtered))
+        unplaced = kf.cameras[name].waiting if kf.cameras[name].T_jacket_camera is None else ""
         cameras.append(CameraCheck(name, clock, tuple(seen), dict(unknown), T_jacket_camera, T_jacket_markers,
-                                   survey_m, name in kf.survey_conflicts, run.first_frame, run.tracker.camera))
+                                   survey_m, name in kf.survey_conflicts, run.first_frame, run.tracker.camera,
+                                   unplaced))
         disagreements += relative_disagreements(rig, name, run.results, run.tracker.camera)
         disagreements += tilt_disagreements(rig, name, run.results)
     points = cone_points(rig)
@@ -680,8 +705,14 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
     readings = [r for name, run in runs.items() for r in cone_readings(rig, name, run.results, points, omega)]
     disagreements += cross_camera_disagreements(rig, readings)
     warnings = [w for run in runs.values() for w in run.warnings]
+    if not kf.scale.fixed:
+        warnings.append(f"{rig.path}: marker_size: {kf.scale.message()}")
+    assert kf.x is not None
+    below = {e.cone: float((point_offset_matrix(cone_points(rig)[e.cone]) @ kf.x[:STATE])[2]) for e in estimates
+             if e.withheld == WITHHELD_BELOW}  # the offset the filter withheld, at the end
     topside = None
     if kf.x is not None and kf.topside_placed:
         topside = np.eye(4)
         topside[:3, :3], topside[:3, 3] = cv2.Rodrigues(np.asarray(kf.x[3:6], dtype=np.float64))[0], kf.x[:3]
-    return CheckReport(rig, seconds, cameras, disagreements, cone_checks(rig, estimates, sights), warnings, topside)
+    return CheckReport(rig, seconds, cameras, disagreements, cone_checks(rig, estimates, sights), warnings, topside,
+                       kf.scale, below)

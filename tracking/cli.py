@@ -19,7 +19,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn
 from tracking.calibration import SUBPIX_WINDOW
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import EXIT_BAD_INPUT, InputError
-from tracking.fusion import ESTIMATORS
+from tracking.fusion import ESTIMATORS, FilterReport
 from tracking.outputs import Outputs, atomic_path, check_outputs
 
 if TYPE_CHECKING:
@@ -319,6 +319,7 @@ def track(
     total = sum(p.frames for p in plans) or None
     outputs = Outputs(keep_on_interrupt=True)
     writer: OffsetsWriter | None = None
+    report = FilterReport()
     run = runner(workers, ray)
     try:
         with outputs, _progress() as progress:
@@ -338,7 +339,7 @@ def track(
                                          roi=roi, warn=True)
             try:
                 with OffsetsWriter(csv_partial) as writer:
-                    for e in estimator(the_rig, measurements):
+                    for e in estimator(the_rig, measurements, report=report):
                         for sink in sinks:
                             sink.on_estimate(e)
                         writer.write(e)
@@ -357,6 +358,25 @@ def track(
         console.print(f"wrote {rrd} (open it with: topside view {rrd})")
     if mcap is not None:
         console.print(f"wrote {mcap} (check it with: topside verify {mcap})")
+    if mode in ("fused", "smoothed"):
+        _rig_findings(rig, report)
+
+
+def _rig_findings(rig_path: Path, report: FilterReport) -> None:
+    """After a fused run: a rig error it found (the markers' size, the topside through its cones), which withheld the
+    offsets, is one error line and exit status 2; else a warning each for the cameras never placed (with why) and a
+    scale nothing fixed."""
+    if report.scale.mismatch:
+        raise InputError(rig_path, report.scale.message() + "; the offsets were withheld", "marker_size")
+    if report.below[0]:
+        raise InputError(rig_path, f"{report.below[0]} offsets put the topside up to {-report.below[1]:.2f} m below "
+                                   "its cone tips, where no set-down can be (withheld): marker_size, a marker's centre "
+                                   "or a pair's mated offset is wrong", "marker_size")
+    for name, why in report.unplaced.items():
+        err_console.print(f"topside: warning: {name}: never placed, so none of its frames was used: {why}",
+                          markup=False)
+    if not report.scale.fixed:
+        err_console.print(f"topside: warning: {rig_path}: marker_size: {report.scale.message()}", markup=False)
 
 
 def _close_sinks(sinks: list) -> None:

@@ -14,6 +14,8 @@ from tracking.rig import Rig
 PAPER_WINDOW = 10  # samples (eq. 17–20)
 WITHHELD_SIGMA = "σ too large"  # the cameras do not see the cone well enough
 WITHHELD_CLOCKS = "clocks not measured"  # σ within bounds but for the topside's motion over its cameras' clock σ
+WITHHELD_SCALE = "rig error: marker size"  # the markers do not look the size the rig states (tracking.scale)
+WITHHELD_BELOW = "rig error: through the cones"  # the offset puts the topside below its cone tips: no set-down can
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ import numpy as np
 from tracking.camera import CameraModel
 from tracking.pose import BodyPose, Choice, MarkerPose, estimate_body_pose
 from tracking.rig import Pair, Rig
+from tracking.scale import ScaleSample, separation_sample
 
 MAX_PAIR_TILT_RAD = np.deg2rad(10.0)  # topside and jacket markers of a pair are never this far from parallel
 
@@ -159,6 +160,7 @@ class BodyObservation:
     topside: BodyPose | None  # T_camera_topside (topside frame = jacket frame when mated)
     corners: dict[int, np.ndarray] = field(default_factory=dict)  # id -> (4, 2) undistorted (ideal) pixels
     K: np.ndarray = field(default_factory=lambda: np.eye(3))  # (3, 3) camera matrix of the ideal pixels
+    scale: tuple[ScaleSample, ...] = ()  # the markers' size against the rig's, from two markers of one body
 
     @property
     def choice(self) -> Choice:
@@ -179,4 +181,21 @@ def observe_bodies(geometry: BodyGeometry, poses: dict[int, MarkerPose], camera:
         return None
     corners = {i: camera.undistort_points(p.corners) for i, p in poses.items()
                if i in geometry.jacket or i in geometry.topside}
-    return BodyObservation(time, name, bodies[0], bodies[1], corners, camera.K)
+    return BodyObservation(time, name, bodies[0], bodies[1], corners, camera.K, separations(geometry, poses, name))
+
+
+def separations(geometry: BodyGeometry, poses: dict[int, MarkerPose], name: str) -> tuple[ScaleSample, ...]:
+    """Scale samples (tracking.scale) from every two markers of one body one frame shows: their separation in the
+    rig against the one measured (their IPPE translations, the same for both solutions)."""
+    out = []
+    for markers in (geometry.jacket, geometry.topside):
+        ids = sorted(i for i in poses if i in markers)
+        for k, i in enumerate(ids):
+            for j in ids[k + 1:]:
+                sample = separation_sample(
+                    name, (i, j), poses[i].T_camera_marker, poses[j].T_camera_marker,
+                    poses[i].covariance[3:, 3:], poses[j].covariance[3:, 3:],
+                    float(np.linalg.norm(markers[i][:3, 3] - markers[j][:3, 3])))
+                if sample is not None:
+                    out.append(sample)
+    return tuple(out)

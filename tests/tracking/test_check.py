@@ -284,3 +284,45 @@ def test_copy_is_deep() -> None:
     copied = copy.deepcopy(data)
     markers(copied)[1]["center"][2] += 1
     assert data["markers"][0]["center"][2] == 0.0
+
+
+# --- the markers' size, and cameras never placed ----------------------------------------------------------------------
+
+def test_a_wrong_marker_size_is_named_before_anything_it_causes(clip: Path, runs: dict[str, CameraRun],
+                                                                 tmp_path: Path) -> None:
+    """The plate's side (1.5 m) entered as marker_size with stern_A surveyed: the first finding names the marker size
+    (the survey then looks 17 m off, which it also says); without a survey nothing fixes the scale, and a warning says
+    so; 0.1 m puts the topside through its cones."""
+    truth = pd.read_csv(clip / "truth.csv").iloc[0][["camera_stern_A_x", "camera_stern_A_y",
+                                                     "camera_stern_A_z"]].to_numpy(float)
+
+    def size(value: float, survey: bool):
+        def change(data: dict) -> None:
+            only_a_and_d(data)
+            data["marker_size"] = value
+            if survey:
+                data["cameras"][0].update(position=truth.tolist(), position_sigma=0.2)
+        return change
+
+    surveyed = checked(clip, runs, tmp_path, size(1.5, True))
+    assert not surveyed.ready and surveyed.problems()[0].startswith("marker_size: the markers look 0.67× their stated")
+    plain = checked(clip, runs, tmp_path, size(1.0, False))
+    assert plain.ready and any("nothing fixes the scale" in w for w in plain.warnings)
+    through = checked(clip, runs, tmp_path, size(0.1, False))
+    assert not through.ready and set(through.below) == {"A", "D"} and min(through.below.values()) < -1.0
+    assert any("below its cone tip" in p for p in through.problems())
+
+
+def test_a_camera_never_placed_says_why(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:
+    """Cone A's jacket markers left out of the rig: stern_A and drone_A see no jacket marker of it, are never placed,
+    and the check says so and why, a line each."""
+    def change(data: dict) -> None:
+        only_a_and_d(data)
+        data["markers"] = [m for m in data["markers"] if m["id"] not in (0, 2)]
+        data["pairs"] = [p for p in data["pairs"] if p["jacket"] not in (0, 2)]
+
+    report = checked(clip, runs, tmp_path, change)
+    unplaced = {c.camera: c.unplaced for c in report.cameras if c.unplaced}
+    assert set(unplaced) == {"stern_A", "drone_A"}
+    assert all(why.startswith("no jacket marker of the rig in its view") for why in unplaced.values())
+    assert sum(p.startswith(("stern_A: never placed", "drone_A: never placed")) for p in report.problems()) == 2
