@@ -230,11 +230,17 @@ class CheckReport:
         """Every marker a disagreement names."""
         return sorted({m for d in self.disagreements for m in d.markers})
 
+    def rig_errors(self) -> list[str]:
+        """One line per rig error the footage shows: markers that do not look their stated size, the topside through
+        its cones."""
+        out = [f"marker_size: {self.scale.message()}"] if self.scale.mismatch else []
+        return out + [f"cone {cone}: the offset puts the topside {-dz:.2f} m below its cone tip, where no set-down can "
+                      "be: marker_size, a marker's centre or a pair's mated offset is wrong"
+                      for cone, dz in self.below.items()]
+
     def problems(self) -> list[str]:
         """One line per finding that makes the rig not ready (empty: ready)."""
-        out = [f"marker_size: {self.scale.message()}"] if self.scale.mismatch else []
-        out += [f"cone {cone}: the offset puts the topside {-dz:.2f} m below its cone tip, where no set-down can be: "
-                "marker_size, a marker's centre or a pair's mated offset is wrong" for cone, dz in self.below.items()]
+        out = self.rig_errors()
         out += [p for c in self.cameras for p in c.problems]
         out += [f"{d.camera}: {d.reason}" for d in self.disagreements]
         if self.unseen_markers and self.unknown_ids:

@@ -995,6 +995,8 @@ def _print_check(report: CheckReport) -> None:
     rig = report.rig
     console.print(f"checked {rig.path} ({rig.name}): {len(rig.markers)} markers, {len(report.cones)} cones, "
                   f"{len(rig.cameras)} cameras, {report.seconds:g} s of each")
+    for line in report.rig_errors():  # first: everything after may follow from it
+        console.print(f"rig error: {line}", markup=False)
     cams = Table(title="cameras")
     for col in ("camera", "frames", "fps stated", "fps kept", "dropped", "irregular", "markers", "survey [m]"):
         cams.add_column(col, justify="left" if col in ("camera", "markers") else "right")

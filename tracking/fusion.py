@@ -59,7 +59,16 @@ from tracking.filtering import (
     raw_estimates,
 )
 from tracking.offsets import MAX_PAIR_TILT_RAD, BodyObservation, PairOffset, body_geometry
-from tracking.placement import DECISIVE_CHI2, LEVEL_SIGMA_RAD, SAME_OPTION_CHI2, Hypotheses, rotation_angle
+from tracking.placement import (
+    DECISIVE_CHI2,
+    EVIDENCE_CAP,
+    LEVEL_SIGMA_RAD,
+    ONE_OPTION_WAIT_S,
+    SAME_OPTION_CHI2,
+    Hypotheses,
+    between,
+    rotation_angle,
+)
 from tracking.pose import BodyPose, Choice, body_object_points
 from tracking.rig import Rig
 from tracking.scale import ScaleEvidence, below_cones, survey_sample
@@ -291,16 +300,6 @@ def _from_params(p: np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3] = rotation(p[:3])
     T[:3, 3] = p[3:]
-    return T
-
-
-def between(poses: list[np.ndarray]) -> np.ndarray:
-    """(4, 4) the pose midway between poses (4, 4) close to each other: mean rotation vector about the first, mean
-    translation."""
-    R_0 = poses[0][:3, :3]
-    T = np.eye(4)
-    T[:3, :3] = rotation(np.mean([rotvec(P[:3, :3] @ R_0.T) for P in poses], axis=0)) @ R_0
-    T[:3, 3] = np.mean([P[:3, 3] for P in poses], axis=0)
     return T
 
 
@@ -727,13 +726,10 @@ class TopsideFilter:
         options = [(jb.T_camera_body, jb.covariance), *jb.alternatives]
         gain = 1.0
         if jb.choice != Choice.UNIQUE and len(options) > 1:
-            if self._one_option(options):  # near square on: the options straddle the true pose within their σ
-                options = [(between([T for T, _ in options]), options[0][1])]
-            else:
-                k = self._settle(cam, o, options)
-                if k is None:
-                    return False
-                options = [options[k]]
+            T_jc = self._settle(cam, o, options)
+            if T_jc is None:
+                return False
+            options = [(inverse(T_jc), options[0][1])]
             gain = AMBIGUOUS_VARIANCE_GAIN
         T_cj, cov = options[0]
         cov_jc = self._camera_covariance(T_cj, cov)
@@ -768,14 +764,15 @@ class TopsideFilter:
         return J @ cov @ J.T
 
     def _settle(self, cam: CameraState, o: BodyObservation, options: list[tuple[np.ndarray, np.ndarray]]
-                ) -> int | None:
-        """Which of an ambiguous jacket view's options places the camera, once the evidence decides (the module
-        tracking.placement); None until then, with the reason in cam.waiting."""
+                ) -> np.ndarray | None:
+        """The pose (4, 4) T_jacket_camera that places a camera whose jacket view is ambiguous, once the evidence
+        decides between its options, or they are one (tracking.placement); None until then, with the reason in
+        cam.waiting."""
         assert self.x is not None and self.P is not None
         positions = [inverse(T)[:3, 3] for T, _ in options]
         h = cam.hypotheses
         order = h.match(positions) if h is not None else None
-        if h is None or order is None:  # the first ambiguous view, or options no longer those kept: start again
+        if h is None or order is None:  # the first ambiguous view
             h = cam.hypotheses = Hypotheses.start(positions, o.time)
             order = list(range(len(options)))
         for j, k in enumerate(order):
@@ -792,37 +789,48 @@ class TopsideFilter:
         zero[cam.index:cam.index + 6] = 0.0
         jacket = [i for i in o.corners if i in self.jacket_corners]
         topside = [i for i in o.corners if i in self.topside_corners] if self.topside_placed else []
+        candidates = [*options, (inverse(between([inverse(T) for T, _ in options])), options[0][1])]
         misfits, distances = [], []
-        for T_cj, cov in options:
+        for n, (T_cj, cov) in enumerate(candidates):
             cam.T_jacket_camera = inverse(T_cj)
-            misfits.append(sum(float(np.sum((self._predict_corners(cam, i, zero, o.K) - o.corners[i].reshape(-1))
-                                            ** 2)) for i in jacket) / sigma2)
-            if topside:
-                distances.append(self._topside_distance(cam, o, topside, self._camera_covariance(T_cj, cov), sigma2))
+            if n < len(options):
+                misfits.append(sum(float(np.sum((self._predict_corners(cam, i, zero, o.K) -
+                                                 o.corners[i].reshape(-1)) ** 2)) for i in jacket) / sigma2)
+            distances.append(self._topside_distance(cam, o, topside, self._camera_covariance(T_cj, cov), sigma2)
+                             if topside else np.nan)
         cam.T_jacket_camera = None
+        for j, k in enumerate(order):
+            h.poses[k].append((distances[j], inverse(options[j][0])))
+        h.between.append((distances[-1], inverse(candidates[-1][0])))
         h.add(chi2(misfits), o.time, "its jacket corners")
-        if topside:
-            h.add(chi2(distances), o.time, "the topside's corners")
+        gate = CORNER_GATE_CHI2 * len(topside)  # the topside's corners fit no option: the topside's state is off, and
+        if topside and min(distances[:len(options)]) <= gate:  # the frame tells nothing of which option is right
+            h.add(chi2([min(d, EVIDENCE_CAP * gate) for d in distances[:len(options)]]), o.time,
+                  "the topside's corners")
         elif o.topside is not None and not self.topside_placed:  # the topside hangs near level under the right one
             tilts = [min(float(np.linalg.norm(rotvec(T[:3, :3].T @ T_ct[:3, :3]))) for T_ct in
                          [o.topside.T_camera_body, *(a for a, _ in o.topside.alternatives)]) for T, _ in options]
             h.add(chi2([(t / LEVEL_SIGMA_RAD) ** 2 for t in tilts]), o.time, "the topside's tilt")
-        if cam.name in self.surveys and not h.surveyed:
-            position, sigma = self.surveys[cam.name]
-            h.add(chi2([float((p - position) @ np.linalg.solve(
-                sigma**2 * np.eye(3) + self._camera_covariance(T, cov)[3:, 3:], p - position))
-                for p, (T, cov) in zip(positions, options, strict=True)]), o.time, "its surveyed position", once=True)
+        if cam.name in self.surveys and not h.surveyed:  # once, and only when it fits one option and rules out another:
+            position, sigma = self.surveys[cam.name]  # a survey off by metres must not choose (it is refused later)
+            survey = [float((p - position) @ np.linalg.solve(sigma**2 * np.eye(3) +
+                                                             self._camera_covariance(T, cov)[3:, 3:], p - position))
+                      for p, (T, cov) in zip(positions, options, strict=True)]
+            if min(survey) <= SURVEY_GATE_CHI2 and max(survey) - min(survey) >= DECISIVE_CHI2:
+                h.add(chi2(survey), o.time, "its surveyed position", once=True)
             h.surveyed = True
         h.step(o.time)
         k = h.decided()
-        if k is None:
-            apart = np.degrees(rotation_angle(options[0][0][:3, :3], options[1][0][:3, :3]))
-            marker = o.jacket.marker_ids[0] if o.jacket is not None else "?"
-            cam.waiting = (f"its view of jacket marker {marker} is ambiguous (two poses {apart:.0f}° apart fit its "
-                           f"corners alike); {', '.join(sorted(h.sources))} tell them apart by χ² {h.margin:.1f} of "
-                           f"{DECISIVE_CHI2:g} so far")
-            return None
-        return order.index(k)
+        if k is not None:
+            return h.pose(k)
+        if self._one_option(options) and h.span >= ONE_OPTION_WAIT_S:  # near square on: between them
+            return h.one()
+        apart = np.degrees(rotation_angle(options[0][0][:3, :3], options[1][0][:3, :3]))
+        marker = o.jacket.marker_ids[0] if o.jacket is not None else "?"
+        cam.waiting = (f"its view of jacket marker {marker} is ambiguous (two poses {apart:.0f}° apart fit its corners "
+                       f"alike); {', '.join(sorted(h.sources))} tell them apart by χ² {h.margin:.1f} of "
+                       f"{DECISIVE_CHI2:g} so far")
+        return None
 
     def _topside_distance(self, cam: CameraState, o: BodyObservation, markers: list[int], camera_cov: np.ndarray,
                           sigma2: float) -> float:
@@ -918,10 +926,10 @@ class TopsideFilter:
         """One Kalman update with the corners (4, 2) of some markers of one body, each with its view's bias; False when
         none was used."""
         assert self.x is not None and self.P is not None
-        sigma = CORNER_NOISE_PX
         columns = [*(range(6) if topside else ()), *range(cam.index, cam.index + 6)]
         views = {marker: self._view(cam, marker, K, time).index for marker in sorted(corners)}
         Hs, ys, Rs = [], [], []
+        sigma = CORNER_NOISE_PX
         for marker, z in sorted(corners.items()):
             i = self.consider.markers.get(marker)
             cols = columns if i is None else [*columns, *range(i, i + 6)]

@@ -27,7 +27,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from tracking.filtering import WITHHELD_CLOCKS, WITHHELD_SIGMA, ConeEstimate
+from tracking.filtering import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
 from tracking.fusion import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_M
 from tracking.live import STALE_S, CameraHealth
 from tracking.rig import Rig
@@ -113,6 +113,10 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
     if reading.age > stale_s:
         return (f"newest {reading.age:.1f} s old" if short
                 else f"newest measurement {reading.age:.1f} s old (limit {stale_s:.1f} s)")
+    if reading.withheld in (WITHHELD_SCALE, WITHHELD_BELOW):
+        return reading.withheld if short else (
+            f"{reading.withheld}: the markers do not look the size the rig states, or the offset would put the topside "
+            "through its cones; a number from this rig would be wrong (topside check names the field)")
     if reading.withheld == WITHHELD_CLOCKS:
         return WITHHELD_CLOCKS if short else (
             "the topside moves while its cameras' clocks are known only to the rig's time_offset_sigma, so where it "

@@ -326,3 +326,18 @@ def test_a_camera_never_placed_says_why(clip: Path, runs: dict[str, CameraRun], 
     assert set(unplaced) == {"stern_A", "drone_A"}
     assert all(why.startswith("no jacket marker of the rig in its view") for why in unplaced.values())
     assert sum(p.startswith(("stern_A: never placed", "drone_A: never placed")) for p in report.problems()) == 2
+
+
+def test_the_command_prints_a_rig_error_first(clip: Path, tmp_path: Path) -> None:
+    """A marker size of 0.1 m for the 1 m markers: check prints the rig error right after its header, exits 1."""
+    def tiny(data: dict) -> None:
+        only_a_and_d(data)
+        data["marker_size"] = 0.1
+
+    rig = rig_file(clip, tmp_path, tiny)
+    proc = subprocess.run([*TOPSIDE, "check", "--rig", str(rig), "--seconds", "2"], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0].startswith("checked ") and lines[1].startswith("rig error: cone A: the offset puts the topside")
+    assert "nothing fixes the scale" in proc.stderr and "NOT READY" in proc.stdout

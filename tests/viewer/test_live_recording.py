@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from rerun.chunk import RrdReader
 
-from tracking.filtering import WITHHELD_CLOCKS, ConeEstimate
+from tracking.filtering import WITHHELD_CLOCKS, WITHHELD_SCALE, ConeEstimate
 from viewer.readback import chunks_by_entity, component_rows
 from viewer.superintendent import ConeState, cone_markdown, cone_reading, no_data_reason
 
@@ -94,6 +94,9 @@ def test_cone_states() -> None:
     untimed = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_CLOCKS), "A", 10.1, 10.05)
     assert no_data_reason(untimed, short=True) == "clocks not measured" and "topside sync" in cone_markdown(untimed)
     assert viewer_safe(cone_markdown(untimed))
+    wrong = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_SCALE), "A", 10.1, 10.05)
+    assert no_data_reason(wrong, short=True) == "rig error: marker size" and "topside check" in cone_markdown(wrong)
+    assert viewer_safe(cone_markdown(wrong))
     old_news = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_CLOCKS), "A", 10.8, 10.2)
     assert no_data_reason(old_news, short=True) == "newest 0.6 s old"  # a stale reading: its age, not its clocks
     assert cone_reading(None, "A", 10.1, None).state == ConeState.NO_DATA
