@@ -661,18 +661,41 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
         source = (f"seen by {', '.join(cameras)}" if has_markers and cameras else
                   f"no camera sees a topside marker at {cone}" if has_markers else
                   f"no marker at {cone}: from the topside's rigid pose through {', '.join(everyone) or 'no camera'}")
+        depth = depth_reason(e, cameras, rig, cone) if e is not None and worst > READY_MAX_SIGMA_M else ""
         if worst > REPORT_MAX_SIGMA_M:
             verdict: Verdict = "weak" if has_markers and cameras else "blind"
             reason = (f"{source}; {mm} is above the {REPORT_MAX_SIGMA_M * 1000:.0f} mm report limit: it would show "
-                      "NO DATA")
+                      f"NO DATA{depth}")
         elif worst > READY_MAX_SIGMA_M:
-            verdict, reason = "weak", f"{source}; {mm} is above the {READY_MAX_SIGMA_M * 1000:.0f} mm a ready cone has"
+            verdict, reason = "weak", (f"{source}; {mm} is above the {READY_MAX_SIGMA_M * 1000:.0f} mm a ready cone "
+                                       f"has{depth}")
         elif len(cameras) < MIN_CAMERAS:
             verdict, reason = "weak", f"{source}; {mm}, but from one camera only: it goes blind if that camera fails"
         else:
             verdict, reason = "ready", f"{source}; {mm}"
         out.append(ConeCheck(cone, sigma, cameras, verdict, reason))
     return out
+
+
+DEPTH_ALIGNED_DEG = 30.0  # a cone's least known direction within this of a camera's line of sight is its depth
+
+
+def depth_reason(e: ConeEstimate, cameras: tuple[str, ...], rig: Rig, cone: str) -> str:
+    """'; the σ lies along CAM's line of sight ...' when a cone's least known direction is the depth of the one
+    camera that measures it (a camera measures depth from the markers' size alone, far worse than across its view),
+    else ''."""
+    if e.covariance is None or not e.T_jacket_cameras or len(cameras) != 1 or cameras[0] not in e.T_jacket_cameras:
+        return ""
+    _, vectors = np.linalg.eigh(e.covariance)
+    axis = vectors[:, -1]
+    point = cone_points(rig)[cone]
+    sight = point - np.asarray(e.T_jacket_cameras[cameras[0]])[:3, 3]
+    cos = abs(float(axis @ sight)) / float(np.linalg.norm(sight))
+    if np.degrees(np.arccos(min(cos, 1.0))) > DEPTH_ALIGNED_DEG:
+        return ""
+    return (f"; it lies along {cameras[0]}'s line of sight, {np.linalg.norm(sight):.0f} m: one camera measures depth "
+            "from the markers' size alone, so a second camera at an angle to it (ideally square), or nearer, would "
+            "measure that axis")
 
 
 def check_rig(rig: Rig, seconds: float = DEFAULT_SECONDS, refinement: Refinement = DEFAULT_REFINEMENT) -> CheckReport:

@@ -341,3 +341,20 @@ def test_the_command_prints_a_rig_error_first(clip: Path, tmp_path: Path) -> Non
     lines = proc.stdout.splitlines()
     assert lines[0].startswith("checked ") and lines[1].startswith("rig error: cone A: the offset puts the topside")
     assert "nothing fixes the scale" in proc.stderr and "NOT READY" in proc.stdout
+
+
+def test_a_single_cameras_depth_is_named_as_the_reason(clip: Path) -> None:
+    """A cone whose σ lies along its one camera's line of sight: the reason says so and what would measure that axis;
+    a σ across the view, or two cameras, say nothing of depth."""
+    from tracking.check import depth_reason
+    from tracking.filtering import ConeEstimate
+
+    rig = load_rig(clip / "rig.yaml")
+    camera = np.eye(4)
+    camera[:3, 3] = np.array(rig.cones["A"]) + np.array([0.0, -40.0, 0.0])
+    along = np.diag([1e-4, 4e-3, 1e-4])  # σ 63 mm along y, the camera's line of sight to A
+    estimate = ConeEstimate(0.0, "A", np.zeros(3), ("stern_A",), along, {"stern_A": camera})
+    assert "along stern_A's line of sight, 40 m" in depth_reason(estimate, ("stern_A",), rig, "A")
+    across = dataclasses.replace(estimate, covariance=np.diag([4e-3, 1e-4, 1e-4]))
+    assert depth_reason(across, ("stern_A",), rig, "A") == ""
+    assert depth_reason(estimate, ("stern_A", "drone_A"), rig, "A") == ""
