@@ -31,7 +31,6 @@ from tracking.images import Frame, VideoHealth
 from tracking.pipeline import FrameResult
 from tracking.pose import Choice, MarkerPose
 from tracking.rig import Rig
-from tracking.sim.transforms import pose_to_T
 
 APP_ID = "topside"
 TIMELINE = "capture_time"
@@ -104,6 +103,16 @@ def log_camera_poses(rec: rr.RecordingStream, path: str, times: np.ndarray, T_ja
                         columns=rr.Transform3D.columns(translation=T_jacket_camera[:, :3, 3],
                                                        mat3x3=T_jacket_camera[:, :3, :3]),
                         recording=rec)
+
+
+def pose_to_T(pose: np.ndarray) -> np.ndarray:
+    """(4, 4) transform from a truth log's pose vector (6,): x, y, z (m), rx, ry, rz (rotation vector, rad).
+
+    Written here, not taken from the simulator: viewer reads truth logs but never imports tracking.sim."""
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(np.asarray(pose[3:6], dtype=np.float64).reshape(3, 1))[0]
+    T[:3, 3] = pose[:3]
+    return T
 
 
 def true_camera_poses(truth: pd.DataFrame, name: str) -> np.ndarray | None:
