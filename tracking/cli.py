@@ -981,8 +981,10 @@ def check(
     _warn_lines(report.warnings)
     _print_check(report)
     if rrd is not None:
+        from viewer.check_recording import record_check
+
         with atomic_path(rrd) as partial:
-            _check_recording(report, partial)
+            record_check(report, partial)
         console.print(f"wrote {rrd} (open it with: topside view {rrd})")
     if not report.ready:
         raise typer.Exit(1)
@@ -1074,43 +1076,6 @@ def _check_next_steps(report: CheckReport) -> list[str]:
                    f"degrees, refine the markers from footage before the lift: topside survey --rig {rig.path} "
                    "-o surveyed.yaml")
     return out
-
-
-def _check_recording(report: CheckReport, path: Path) -> None:
-    """The installation as the check understood it, as a Rerun recording: the rig's markers and cones, the topside
-    where the filter has it, every camera placed by its own markers with its first frame and the markers it sees
-    (red: named by a disagreement), and the findings."""
-    import rerun as rr
-
-    from viewer.installation import log_installation
-    from viewer.recording import APP_ID, log_frustum, log_image, log_marker_frames, log_rig, set_capture_time
-
-    rec = rr.RecordingStream(APP_ID)
-    rec.save(str(path))
-    log_rig(rec, report.rig)
-    log_installation(rec, report.rig)
-    if report.T_jacket_topside is not None:
-        T = report.T_jacket_topside
-        rr.log("world/topside", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]), static=True, recording=rec)
-    wrong = set(report.disagreeing_markers)
-    for c in report.cameras:
-        if c.T_jacket_camera is None or c.model is None:
-            continue
-        base = f"world/cameras/{c.camera}"
-        T = c.T_jacket_camera
-        rr.log(base, rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]), static=True, recording=rec)
-        log_frustum(rec, base, c.model)
-        if c.T_jacket_markers:
-            log_marker_frames(rec, f"world/estimated/{c.camera}", report.rig.marker_size, c.T_jacket_markers,
-                              [(230, 40, 40) if i in wrong else (40, 200, 80) for i in c.T_jacket_markers])
-        if c.first_frame is not None and c.first_frame.gray is not None:
-            set_capture_time(rec, c.first_frame.time)
-            log_image(rec, f"{base}/image", c.first_frame)
-    lines = ["# topside check", "", *(f"- {line}" for line in report.problems() or ["READY"]), "", "| cone | verdict |",
-             "|---|---|", *(f"| {c.cone} | {c.verdict}: {c.reason} |" for c in report.cones)]
-    rr.log("check", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True, recording=rec)
-    rec.flush(timeout_sec=1e38)
-    rec.disconnect()
 
 
 DEMO_SCENARIO = "config2-procedure5-weather"
