@@ -20,7 +20,7 @@ from pathlib import Path
 
 from benchmarks.scenes import CACHE, render_scene
 from benchmarks.throughput import SCENARIO, streams_rig
-from tracking.cli import LIVE_ESTIMATE_PERIOD_S
+from tracking.cli.live import LIVE_ESTIMATE_PERIOD_S
 from tracking.live import LiveTracker
 from tracking.rig import load_rig
 from viewer.session import BACKLOG_TIMEOUT_S, Recorder

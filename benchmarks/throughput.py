@@ -31,7 +31,7 @@ import yaml
 
 from benchmarks.report import write_results
 from benchmarks.scenes import FPS, render_scene
-from tracking.cli import LIVE_ESTIMATE_PERIOD_S
+from tracking.cli.live import LIVE_ESTIMATE_PERIOD_S
 from tracking.detection import DEFAULT_REFINEMENT
 from tracking.fusion import FilterTuning, TopsideFilter, filter_frame
 from tracking.images import frames

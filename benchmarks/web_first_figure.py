@@ -191,7 +191,7 @@ def remove_tree(path: Path) -> None:
 
 def ten_minute_recording(scene: Path) -> Path:
     """A 10-minute live recording of the scene looped (cached): the live path flat out, 1-minute segments."""
-    from tracking.cli import LIVE_ESTIMATE_PERIOD_S
+    from tracking.cli.live import LIVE_ESTIMATE_PERIOD_S
     from tracking.live import LiveTracker
     from tracking.rig import load_rig
     from viewer.session import Recorder

@@ -201,7 +201,7 @@ def test_rain_pass_runs_where_rain_is(clip: Path, installation: Path) -> None:
 
 
 def test_the_cli_default_chunk_is_the_trackers() -> None:
-    from tracking.cli import CHUNK_FRAMES_DEFAULT
+    from tracking.cli.options import CHUNK_FRAMES_DEFAULT
     from tracking.parallel import CHUNK_FRAMES
 
     assert CHUNK_FRAMES_DEFAULT == CHUNK_FRAMES

@@ -1,0 +1,79 @@
+"""The `topside` command line: one subcommand per job, bad input as one line and exit status 2.
+
+The command line is the one place that composes everything: the tracker (tracking/), the viewers and archives
+(viewer/) and the simulator (tracking/sim/); nothing imports it (the contracts in pyproject.toml, checked by
+lint-imports). Its commands live by group:
+
+    fieldwork.py   calibrate, detect, check, sync, survey (and their tables)
+    run.py         track, batch, evaluate, demo (track and batch share one run loop)
+    archive.py     export, verify
+    live.py        live
+    view.py        view
+    sim.py         simulate
+    options.py     the options several commands share, the finite-number callback, the choices (StrEnums)
+    common.py      the consoles, warning lines, progress bar, the one-line rule
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+
+import typer
+
+from tracking.cli import archive, fieldwork, live, run, sim, view
+from tracking.cli.common import EXIT_INTERRUPTED, err_console, one_line
+from tracking.errors import EXIT_BAD_INPUT, InputError
+
+app = typer.Typer(
+    name="topside",
+    help="Watch an offshore topside being set down on its jacket, from cameras.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+for command in (fieldwork.calibrate, fieldwork.detect, run.track, run.batch, archive.export, archive.verify, view.view,
+                live.live, fieldwork.sync, fieldwork.survey, sim.simulate, run.evaluate, fieldwork.check, run.demo):
+    app.command()(command)  # in this order in `topside --help`
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGTERM ends a command as Ctrl-C does: outputs are completed or removed, recordings kept, children stopped."""
+    raise KeyboardInterrupt
+
+
+def _ray_address_optional(args: list[str]) -> list[str]:
+    """`--ray` given without an address (last, or before another option) means a Ray started here: "local"."""
+    out = list(args)
+    for i in range(len(out) - 1, -1, -1):
+        if out[i] == "--ray" and (i + 1 == len(out) or out[i + 1].startswith("-")):
+            out.insert(i + 1, "local")
+    return out
+
+
+def main() -> None:
+    """Console entry point: bad input (files, options, usage) becomes one line on stderr and exit status 2."""
+    if len(sys.argv) <= 1:  # no command: the help, as typer prints it
+        app()
+        return
+    signal.signal(signal.SIGTERM, _interrupt)
+    sys.argv[1:] = _ray_address_optional(sys.argv[1:])
+    try:
+        code = app(standalone_mode=False)
+    except InputError as exc:
+        err_console.print(f"topside: error: {one_line(exc)}", markup=False)
+        sys.exit(EXIT_BAD_INPUT)
+    except typer.TyperException as exc:  # typer's usage errors: a missing option, a value of the wrong type
+        message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        ctx = getattr(exc, "ctx", None)
+        hint = f" (see: {ctx.command_path} --help)" if ctx is not None else ""
+        err_console.print(f"topside: error: {one_line(message)}{hint}", markup=False)
+        sys.exit(getattr(exc, "exit_code", EXIT_BAD_INPUT))
+    except (typer.Abort, KeyboardInterrupt):
+        err_console.print("topside: stopped", markup=False)
+        sys.exit(EXIT_INTERRUPTED)
+    except OSError as exc:  # the disk filled, a folder vanished: the environment, named in one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        err_console.print(f"topside: error: {where}{exc.strerror or exc}", markup=False)
+        sys.exit(EXIT_BAD_INPUT)
+    sys.exit(code if isinstance(code, int) else 0)

@@ -1,0 +1,220 @@
+"""`topside live`: every camera tracked live and fused, recorded in segments, and streamed to the superintendent's
+view (a native or web Rerun viewer the tool starts) and to Foxglove.
+
+A session never overwrites an earlier one's record, and however it ends (done, Ctrl-C, SIGTERM, a failure) it keeps
+what was recorded under its final names and stops the viewer it started.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from tracking.cli.common import console, err_console, rig_inputs, warn_lines, warn_rig
+from tracking.cli.options import WEB_PORT_DEFAULT, Layout, ViewerScope, WebPortOption, finite
+from tracking.errors import InputError
+from tracking.outputs import Outputs, check_outputs
+
+if TYPE_CHECKING:
+    import subprocess
+
+    from tracking.filtering import ConeEstimate
+    from tracking.live import LiveTracker
+    from tracking.report import OffsetsWriter
+    from tracking.rig import Rig
+    from viewer.foxglove_live import FoxgloveStream
+    from viewer.session import Recorder
+
+LIVE_SEGMENT_MIN = 1.0  # a minute a file: quick to open, and `topside view --from --to` picks the window
+LIVE_ESTIMATE_PERIOD_S = 1 / 30  # the recording keeps a cone's estimates at up to 30 Hz (the CSV keeps all)
+GRPC_PORT_DEFAULT = 9876  # viewer.playback.GRPC_PORT
+FOXGLOVE_PORT_DEFAULT = 8765  # Foxglove's own default for a WebSocket server
+
+RigOption = Annotated[Path, typer.Option(help="Rig file; each camera's source is a device index, a stream URL "
+                                              "(rtsp://, http://) or a video file replayed at its frame rate.")]
+RrdOption = Annotated[Path | None, typer.Option(help="Recording to write, in segments <stem>-NNN.rrd (default: "
+                                                     "recordings/live-<date>-<time>.rrd).")]
+OutOption = Annotated[Path | None, typer.Option("-o", "--out", help="Offsets CSV, written as they are measured "
+                                                                    "(default: beside the recording).")]
+SpawnOption = Annotated[bool, typer.Option("--spawn", help="Stream to a native viewer.")]
+WebOption = Annotated[bool, typer.Option("--web", help="Serve the web viewer (a tablet on the stern).")]
+BindOption = Annotated[str, typer.Option(help="Address (or host name) of this machine the viewer's servers listen on "
+                                              "(--web, --spawn).")]
+StaleOption = Annotated[float, typer.Option(help="Seconds after which a cone shows NO DATA.", callback=finite(0.0))]
+SegmentOption = Annotated[float, typer.Option(help="Minutes of capture time per recording file.",
+                                              callback=finite(0.0))]
+SpeedOption = Annotated[float, typer.Option(help="Replay speed of video files (1: real time; inf: flat out).",
+                                            callback=finite(0.0, allow_inf=True))]
+DurationOption = Annotated[float | None, typer.Option(help="Stop after this many seconds of capture time.",
+                                                      callback=finite(0.0))]
+LayoutOption = Annotated[Layout, typer.Option(help="Layout stored in the recording: superintendent or analysis.")]
+ScopeOption = Annotated[ViewerScope, typer.Option(help="What the viewer (--web, --spawn) of the superintendent's "
+                                                       "layout gets: superintendent (what it shows) or all "
+                                                       "(everything recorded).")]
+GrpcPortOption = Annotated[int, typer.Option(help="Port of the viewer's gRPC server (--web, --spawn).", min=1,
+                                             max=65535)]
+FoxgloveOption = Annotated[bool, typer.Option("--foxglove", help="Stream the archive's channels to Foxglove (a "
+                                                                 "WebSocket server, ws://<bind>:<port>).")]
+PortOption = Annotated[int, typer.Option("--port", help="Port of the Foxglove WebSocket server (with --foxglove).",
+                                         min=1, max=65535)]
+
+
+def live(
+    rig: RigOption,
+    rrd: RrdOption = None,
+    out: OutOption = None,
+    spawn: SpawnOption = False,
+    web: WebOption = False,
+    bind: BindOption = "127.0.0.1",
+    stale: StaleOption = 0.5,
+    segment_minutes: SegmentOption = LIVE_SEGMENT_MIN,
+    speed: SpeedOption = 1.0,
+    duration: DurationOption = None,
+    layout: LayoutOption = Layout.SUPERINTENDENT,
+    viewer_scope: ScopeOption = ViewerScope.SUPERINTENDENT,
+    web_port: WebPortOption = WEB_PORT_DEFAULT,
+    grpc_port: GrpcPortOption = GRPC_PORT_DEFAULT,
+    foxglove: FoxgloveOption = False,
+    port: PortOption = FOXGLOVE_PORT_DEFAULT,
+) -> None:
+    """Track every camera live, fuse them, record, and stream to the superintendent's view (and Foxglove)."""
+    from tracking.rig import load_rig
+    from viewer.playback import resolve_bind, start_live_viewer, web_viewer_url
+
+    if spawn and web:
+        raise InputError("--spawn/--web", "choose one viewer")
+    the_rig = load_rig(rig)
+    warn_rig(the_rig)
+    rrd, out = _session_files(the_rig, rrd, out)
+    fox_address = _check_ports(bind, spawn, web, foxglove, port, grpc_port, web_port)
+    viewer_url, viewer_process = start_live_viewer(web, bind, grpc_port, web_port) if spawn or web else (None, None)
+    if web:
+        console.print(f"web viewer: {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}")
+    session = LiveSession(the_rig, rrd, out, viewer_process=viewer_process)
+    try:
+        if fox_address is not None:
+            session.fox = _foxglove(the_rig, fox_address, port, warn=not (spawn or web))
+        session.record(speed, duration, viewer_url, segment_minutes * 60, stale, layout, viewer_scope)
+    except KeyboardInterrupt:
+        err_console.print("stopped")
+    finally:
+        session.close()
+    console.print(f"wrote {session.rows} rows to {out}; recording {rrd.with_name(rrd.stem + '-*.rrd')}")
+
+
+def _session_files(rig: Rig, rrd: Path | None, out: Path | None) -> tuple[Path, Path]:
+    """The recording and the offsets CSV (defaults: recordings/live-<date>-<time>.rrd, the CSV beside it), checked
+    to be writable and not an earlier session's record."""
+    rrd = rrd or Path("recordings") / f"live-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
+    out = out or rrd.with_name(f"{rrd.stem}-offsets.csv")
+    check_outputs({"--out": out, "--rrd": rrd}, rig_inputs(rig))
+    for path, option in ((out, "--out"), (rrd.with_name(f"{rrd.stem}.segments.csv"), "--rrd"),
+                         (rrd.with_name(f"{rrd.stem}-000.rrd"), "--rrd")):
+        if path.exists():
+            raise InputError(path, "exists (an earlier session's record; a live session never overwrites one): "
+                                   "expected another name", option)
+    return rrd, out
+
+
+def _check_ports(bind: str, spawn: bool, web: bool, foxglove: bool, port: int, grpc_port: int, web_port: int
+                 ) -> str | None:
+    """Every port the session's servers will listen on checked free before anything starts; the Foxglove server's
+    address (None without --foxglove)."""
+    from viewer.playback import check_port_free, resolve_bind
+
+    fox_address = resolve_bind(bind) if foxglove else None
+    if fox_address is not None:
+        check_port_free(fox_address, port, "--port")
+    if spawn or web:
+        check_port_free(resolve_bind(bind), grpc_port, "--grpc-port")
+    if web:
+        check_port_free(resolve_bind(bind), web_port, "--web-port")
+    return fox_address
+
+
+def _foxglove(rig: Rig, address: str, port: int, warn: bool) -> FoxgloveStream:
+    """The Foxglove WebSocket server, its URL printed; warn: say when it listens beyond this machine (the viewers
+    warn for themselves)."""
+    from viewer.foxglove_live import FoxgloveStream
+    from viewer.playback import url_host, warn_if_exposed
+
+    if warn:
+        warn_if_exposed(address)
+    fox = FoxgloveStream(rig, address, port)
+    console.print(f"foxglove: ws://{url_host(address)}:{fox.port}", markup=False)
+    return fox
+
+
+@dataclass
+class LiveSession:
+    """A live session's parts, each ended by close however the session ends: the recording, the offsets CSV (renamed
+    onto its final name), the viewer the tool started and the Foxglove server."""
+
+    rig: Rig
+    rrd: Path
+    out: Path
+    outputs: Outputs = field(default_factory=Outputs)
+    viewer_process: subprocess.Popen | None = None
+    fox: FoxgloveStream | None = None
+    recorder: Recorder | None = None
+    writer: OffsetsWriter | None = None
+
+    @property
+    def rows(self) -> int:
+        """Offsets written so far."""
+        return self.writer.rows if self.writer is not None else 0
+
+    def record(self, speed: float, duration: float | None, viewer_url: str | None, segment_s: float, stale_s: float,
+               layout: Layout, viewer_scope: ViewerScope) -> None:
+        """Track every camera (video files replayed at speed) until duration s of capture time (None: until stopped)
+        into the recording, in segment_s files and streamed to the viewer at viewer_url, and the offsets CSV."""
+        from tracking.live import LiveTracker
+        from tracking.report import OffsetsWriter
+        from viewer.session import Recorder
+
+        self.recorder = Recorder(self.rig, self.rrd, viewer=viewer_url, segment_s=segment_s, stale_s=stale_s,
+                                 layout=layout.value, estimate_period_s=LIVE_ESTIMATE_PERIOD_S,
+                                 viewer_scope=viewer_scope.value, forward=[self.fox] if self.fox is not None else [])
+        with OffsetsWriter(self.outputs.claim(self.out)) as self.writer:
+            console.print(f"recording to {self.rrd.with_name(self.rrd.stem + '-*.rrd')} and {self.writer.path} "
+                          f"(renamed {self.out.name} when the session ends)", markup=False, soft_wrap=True)
+            with LiveTracker(self.rig, speed=speed) as tracker:
+                console.print(f"live: {len(tracker.names)} cameras; Ctrl-C stops and keeps everything recorded")
+                for e in self._estimates(tracker, duration):
+                    self.writer.write(e)
+
+    def _estimates(self, tracker: LiveTracker, duration: float | None) -> Iterator[ConeEstimate]:
+        """The fused estimates as the cameras' frames come, each update recorded and its camera events and frames'
+        warnings printed; they end after duration s of capture time."""
+        start = None  # capture time of the first frame
+        for update in tracker.updates():
+            self.recorder.on_update(update)
+            for event in update.events:
+                err_console.print(f"{event.camera}: {event.state}" + (f" ({event.detail})" if event.detail else ""))
+            yield from update.estimates
+            for result in update.results:
+                warn_lines(result.warnings)
+            if update.results:
+                start = update.results[0].time if start is None else start
+                if duration is not None and update.results[-1].time - start >= duration:
+                    return
+
+    def close(self) -> None:
+        """Close the recording, keep what was measured under its final names (the record of the lift, however the
+        session ended), and stop the viewer and the Foxglove server."""
+        from viewer.playback import stop_viewer
+
+        try:
+            if self.recorder is not None:
+                self.recorder.close()
+        finally:
+            self.outputs.commit()
+            if self.viewer_process is not None:  # the viewers the tool starts end with it
+                stop_viewer(self.viewer_process)
+            if self.fox is not None:
+                self.fox.close()

@@ -1,0 +1,471 @@
+"""Runs of the tracker over recorded videos: `track` one installation, `batch` many, `evaluate` offsets against a
+truth, and the `demo` that simulates, tracks and evaluates one.
+
+`track` and `batch` share one loop (RunLoop): the rig's videos cut into chunks and tracked by worker processes or Ray
+tasks (tracking.parallel), each frame counted, shown on the progress bar and given to the sinks (a Rerun recording,
+an MCAP archive), and the estimator's offsets written to the CSV and given to the sinks.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Protocol
+
+import typer
+
+from tracking.cli.archive import ArchiveSettings, archive_sink
+from tracking.cli.common import (
+    EXIT_INTERRUPTED,
+    console,
+    err_console,
+    one_line,
+    progress_bar,
+    rig_inputs,
+    warn_lines,
+    warn_rig,
+)
+from tracking.cli.options import (
+    CHUNK_FRAMES_DEFAULT,
+    ChunkOption,
+    KeyOption,
+    Mode,
+    OperatorOption,
+    RayOption,
+    RefineOption,
+    VesselOption,
+    VideoFormat,
+    VideoOption,
+    WorkersOption,
+    finite,
+)
+from tracking.cli.view import view
+from tracking.detection import DEFAULT_REFINEMENT, Refinement
+from tracking.errors import InputError
+from tracking.outputs import Outputs, check_outputs
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from rich.progress import Progress, TaskID
+
+    from tracking.batch import Installation, Outcome
+    from tracking.evaluate import Evaluation
+    from tracking.filtering import ConeEstimate
+    from tracking.estimator import FilterReport, Measurement
+    from tracking.parallel import Runner, VideoPlan
+    from tracking.pipeline import FrameResult, TrackStats
+    from tracking.report import OffsetsWriter
+    from tracking.rig import Rig
+
+Estimator = Callable[..., Iterable["ConeEstimate"]]  # tracking.estimator.ESTIMATORS' values: (rig, measurements, report)
+
+DEMO_SCENARIO = "config2-procedure5-weather"
+DEMO_DURATION_S = 20.0
+
+
+class RunSink(Protocol):
+    """What takes a run's frames and estimates besides the CSV: viewer.session.Recorder, viewer.archive.ArchiveSink."""
+
+    def on_frame(self, result: FrameResult) -> None: ...
+
+    def on_estimate(self, estimate: ConeEstimate) -> None: ...
+
+    def close(self) -> None: ...
+
+
+@dataclass
+class RunLoop:
+    """The loop `track` and `batch` share: the rig's planned chunks tracked by run (tracking.parallel.track_chunks),
+    each frame counted in stats, advanced on the progress bar and given to the sinks; the estimator's offsets written
+    to the offsets CSV and given to the sinks. roi: search each frame around the markers of the frames before it;
+    warn: print each frame's warnings."""
+
+    rig: Rig
+    run: Runner
+    refine: Refinement
+    plans: list[VideoPlan]
+    stats: TrackStats
+    advance: Callable[[], None] = lambda: None
+    sinks: list[RunSink] = field(default_factory=list)
+    roi: bool = False
+    warn: bool = False
+    writer: OffsetsWriter | None = None  # the offsets CSV's, once open
+
+    @property
+    def rows(self) -> int:
+        """Offsets written so far (also after an interruption)."""
+        return self.writer.rows if self.writer is not None else 0
+
+    def measurements(self) -> Iterator[Measurement]:
+        """The tracked frames' pair offsets and body observations, in capture-time order."""
+        from tracking.parallel import track_chunks
+
+        sinks = bool(self.sinks)  # the sinks record the frames' packets and images; the CSV alone needs neither
+        for result in track_chunks(self.rig, self.run, self.refine, packets=sinks, keep_gray=sinks,
+                                   roi_tracking=self.roi, stats=self.stats, plans=self.plans):
+            self.stats.add(result)
+            self.advance()
+            if self.warn:
+                warn_lines(result.warnings)
+            for sink in self.sinks:
+                sink.on_frame(result)
+            yield from result.offsets
+            if result.observation is not None:
+                yield result.observation
+
+    def write(self, csv: Path, estimator: Estimator, report: FilterReport | None = None) -> None:
+        """The estimator's offsets into csv and the sinks. The sinks are closed after the CSV however the loop ends
+        (an archive attaches the finished CSV); while an error propagates, a sink that fails to close does not hide
+        it."""
+        from tracking.report import OffsetsWriter
+
+        try:
+            with OffsetsWriter(csv) as self.writer:
+                for e in estimator(self.rig, self.measurements(), report=report):
+                    for sink in self.sinks:
+                        sink.on_estimate(e)
+                    self.writer.write(e)
+        finally:
+            failing = sys.exc_info()[1] is not None
+            for sink in self.sinks:
+                try:
+                    sink.close()
+                except Exception:
+                    if not failing:
+                        raise
+
+
+def recorder(rig: Rig, path: Path, truth_df: pd.DataFrame | None, options: dict[str, str],
+             show_rejected: bool = False) -> RunSink:
+    """The Rerun recording of a run (the command line composes tracker and viewer; tracking/ never imports viewer)."""
+    from viewer.session import Recorder
+
+    return Recorder(rig, path, truth_df, show_rejected=show_rejected, options=options)
+
+
+ModeOption = Annotated[Mode, typer.Option(help="fused: live rigid-body Kalman filter of all cameras; smoothed: the "
+                                               "same, then smoothed (RTS) by the next 45 s at least; paper: the "
+                                               "paper's method; raw: every camera's pair offset.")]
+RoiOption = Annotated[bool, typer.Option("--roi", help="Search each frame around the markers of the frames before it "
+                                                       "(the live path's detector, afresh at every chunk): about 2.4x "
+                                                       "less CPU per frame; on the demo 0.8 % fewer markers, e_MAE 1 "
+                                                       "mm larger in x and y.")]
+
+
+def track(
+    rig: Annotated[Path, typer.Option(help="Rig file of the installation.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Offsets CSV to write.")] = Path("offsets.csv"),
+    mode: ModeOption = Mode.FUSED,
+    refine: RefineOption = DEFAULT_REFINEMENT,
+    rrd: Annotated[Path | None, typer.Option(help="Also record everything to this Rerun file (.rrd).")] = None,
+    truth: Annotated[Path | None, typer.Option(help="Ground-truth log to overlay in the recording.")] = None,
+    rejected: Annotated[bool, typer.Option("--rejected", help="Record rejected marker candidates too.")] = False,
+    mcap: Annotated[Path | None, typer.Option(help="Also write an MCAP audit archive (opens in Foxglove, Rerun).")
+                    ] = None,
+    key: KeyOption = None,
+    vessel: VesselOption = "",
+    operator: OperatorOption = "",
+    video: VideoOption = VideoFormat.JPEG,
+    workers: WorkersOption = None,
+    ray: RayOption = None,
+    chunk_frames: ChunkOption = CHUNK_FRAMES_DEFAULT,
+    roi: RoiOption = False,
+) -> None:
+    """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording.
+
+    Each camera's video is cut into chunks at keyframes, tracked in worker processes (--workers) or Ray tasks
+    (--ray) and fused here in capture-time order: the output is the same whatever runs the chunks."""
+    from tracking.evaluate import read_truth
+    from tracking.estimator import ESTIMATORS, FilterReport
+    from tracking.parallel import plan_rig, runner
+    from tracking.pipeline import TrackStats
+    from tracking.rig import load_rig
+
+    the_rig = load_rig(rig)
+    warn_rig(the_rig)
+    check_outputs({"--out": out, "--rrd": rrd, "--mcap": mcap}, [*rig_inputs(the_rig), truth, key])
+    truth_df = read_truth(truth) if truth else None
+    archive = ArchiveSettings.read(key, vessel, operator, video) if mcap is not None else None  # before any work
+    options = {"mode": mode.value, "refine": refine.value, **({"roi": "on"} if roi else {})}
+    report = FilterReport()
+    plans = plan_rig(the_rig, chunk_frames=chunk_frames)
+    outputs = Outputs(keep_on_interrupt=True)
+    loop = RunLoop(the_rig, runner(workers, ray), refine, plans, TrackStats(), roi=roi, warn=True)
+    try:
+        with outputs, progress_bar() as progress:
+            csv = outputs.claim(out)
+            if rrd is not None:
+                loop.sinks.append(recorder(the_rig, outputs.claim(rrd), truth_df, options, show_rejected=rejected))
+            if archive is not None:
+                loop.sinks.append(archive_sink(the_rig, outputs.claim(mcap), options, truth_df, archive, csv))
+            task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras",
+                                     total=sum(p.frames for p in plans) or None)
+            loop.advance = lambda: progress.advance(task)
+            loop.write(csv, ESTIMATORS[mode], report)
+    except KeyboardInterrupt:
+        kept = ", ".join(map(str, outputs.kept)) or "nothing"
+        err_console.print(f"stopped after {loop.rows} rows; what was written is kept in {kept}", markup=False)
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    finally:
+        loop.run.close()
+    _print_track_summary(the_rig, rig, mode, loop.stats)
+    _print_track_outputs(loop.rows, out, rrd, mcap)
+    if mode in (Mode.FUSED, Mode.SMOOTHED):
+        _rig_findings(rig, report)
+
+
+def _print_track_summary(rig: Rig, rig_path: Path, mode: Mode, stats: TrackStats) -> None:
+    """The run's table per camera, and what it ignored."""
+    from rich.table import Table
+
+    table = Table(title=f"tracked {rig_path} ({mode} mode)")
+    for col in ("camera", "frames", "markers", "pair offsets", "ambiguous"):
+        table.add_column(col, justify="right" if col != "camera" else "left")
+    for cam in rig.cameras:
+        n = cam.name
+        table.add_row(n, str(stats.frames[n]), str(stats.markers[n]), str(stats.pair_offsets[n]),
+                      str(stats.ambiguous[n]))
+    console.print(table)
+    if stats.unknown_ids:
+        summary = ", ".join(f"id {i}: {n}" for i, n in sorted(stats.unknown_ids.items()))
+        console.print(f"markers not in the rig (ignored): {summary}", style="yellow")
+    for line in stats.warnings([c.name for c in rig.cameras]):  # videos cut short, timestamps back or jumping
+        err_console.print(f"topside: warning: {line}", style="yellow")
+
+
+def _print_track_outputs(rows: int, out: Path, rrd: Path | None, mcap: Path | None) -> None:
+    """What the run wrote, and the command that opens or checks each."""
+    console.print(f"wrote {rows} rows to {out}")
+    if rrd is not None:
+        console.print(f"wrote {rrd} (open it with: topside view {rrd})")
+    if mcap is not None:
+        console.print(f"wrote {mcap} (check it with: topside verify {mcap})")
+
+
+def _rig_findings(rig_path: Path, report: FilterReport) -> None:
+    """After a fused run: a rig error it found (the markers' size, the topside through its cones), which withheld the
+    offsets, is one error line and exit status 2; else a warning each for the cameras never placed (with why) and a
+    scale nothing fixed."""
+    if report.scale.mismatch:
+        raise InputError(rig_path, report.scale.message() + "; the offsets were withheld", "marker_size")
+    if report.below[0]:
+        raise InputError(rig_path, f"{report.below[0]} offsets put the topside up to {-report.below[1]:.2f} m below "
+                                   "its cone tips, where no set-down can be (withheld): marker_size, a marker's centre "
+                                   "or a pair's mated offset is wrong", "marker_size")
+    for name, why in report.unplaced.items():
+        err_console.print(f"topside: warning: {name}: never placed, so none of its frames was used: {why}",
+                          markup=False)
+    if not report.scale.fixed:
+        err_console.print(f"topside: warning: {rig_path}: marker_size: {report.scale.message()}", markup=False)
+
+
+@dataclass
+class Prepared:
+    """One installation of a batch as read before any work: its rig and plans, or the one-line reason it cannot run."""
+
+    inst: Installation
+    rig: Rig | None
+    plans: list[VideoPlan]
+    error: str = ""
+
+
+def batch(
+    manifest: Annotated[Path, typer.Argument(help="YAML manifest: a list of installations, one per line: {rig: R, "
+                                                  "out: FOLDER, truth: T (optional)}.")],
+    workers: WorkersOption = None,
+    ray: RayOption = None,
+    refine: RefineOption = DEFAULT_REFINEMENT,
+    chunk_frames: ChunkOption = CHUNK_FRAMES_DEFAULT,
+) -> None:
+    """Re-analyse many installations: each one's offsets.csv (run.rrd with rrd: true, accuracy.md with a truth) in
+    its out folder, one progress bar over all, then a table: frames, video and wall time, accuracy, failures.
+
+    One that fails does not stop the others. Exit status: 0 when all succeeded, 1 when any failed, 2 for a bad
+    manifest."""
+    import time
+
+    from tracking.batch import load_manifest
+    from tracking.parallel import runner
+
+    installations = load_manifest(manifest)
+    prepared = [_prepare(inst, chunk_frames) for inst in installations]  # every rig and keyframe read before any work
+    run = runner(workers, ray)
+    outcomes: list[Outcome] = []
+    started = time.perf_counter()
+    try:
+        with progress_bar() as progress:
+            total = sum(p.frames for one in prepared for p in one.plans) or None
+            task = progress.add_task(f"{len(installations)} installations on {run.workers} workers", total=total)
+            for one in prepared:
+                progress.update(task, description=f"{one.inst.label} ({len(outcomes) + 1}/{len(installations)})")
+                outcomes.append(_batch_one(one, run, refine, progress, task))
+    finally:
+        run.close()
+    _print_batch(manifest, outcomes, time.perf_counter() - started)
+    if not all(o.ok for o in outcomes):
+        raise typer.Exit(1)
+
+
+def _prepare(inst: Installation, chunk_frames: int) -> Prepared:
+    """An installation's rig read and every video's keyframes found, or why not."""
+    from tracking.parallel import plan_rig
+    from tracking.rig import load_rig
+
+    try:
+        the_rig = load_rig(inst.rig)
+        return Prepared(inst, the_rig, plan_rig(the_rig, chunk_frames=chunk_frames))
+    except InputError as exc:
+        return Prepared(inst, None, [], one_line(exc))
+
+
+def _batch_one(one: Prepared, run: Runner, refine: Refinement, progress: Progress, task: TaskID) -> Outcome:
+    """One installation of a batch: its outputs, or its one-line failure (the frames it did not track are counted
+    off the progress bar)."""
+    import time
+
+    from tracking.batch import Outcome
+    from tracking.pipeline import TrackStats
+
+    inst = one.inst
+    outcome = Outcome(inst.label, error=one.error)
+    fresh = not inst.out.exists()  # a folder made here and left empty by a failure is removed
+    loop = RunLoop(one.rig, run, refine, one.plans, TrackStats(), advance=lambda: progress.advance(task))
+    t0 = time.perf_counter()
+    try:
+        if not one.error:
+            _track_installation(inst, loop, outcome)
+    except InputError as exc:
+        outcome.error = one_line(exc)
+    except Exception as exc:  # not bad input: a bug or the environment; named in one line, the others go on
+        outcome.error = one_line(f"{type(exc).__name__}: {exc}")
+    finally:
+        outcome.frames = sum(loop.stats.frames.values())
+        outcome.video_s = max(((v.last_s or 0.0) - (v.first_s or 0.0) for v in loop.stats.videos.values()),
+                              default=0.0)
+        outcome.wall_s = time.perf_counter() - t0
+        progress.advance(task, max(sum(p.frames for p in one.plans) - outcome.frames, 0))
+        if outcome.error and fresh and inst.out.is_dir() and not any(inst.out.iterdir()):
+            inst.out.rmdir()
+    return outcome
+
+
+def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome) -> None:
+    """One installation's offsets.csv (and run.rrd), then, with a truth, its accuracy.md and errors in outcome."""
+    from tracking.batch import ACCURACY_NAME, OFFSETS_NAME, RRD_NAME
+    from tracking.evaluate import evaluate_runs, evaluation_markdown, read_offsets, read_truth
+    from tracking.estimator import ESTIMATORS
+    from tracking.outputs import write_text
+
+    csv, rrd = inst.out / OFFSETS_NAME, (inst.out / RRD_NAME) if inst.rrd else None
+    accuracy = inst.out / ACCURACY_NAME if inst.truth is not None else None
+    check_outputs({"out": csv, "rrd": rrd, "accuracy": accuracy}, [*rig_inputs(loop.rig), inst.truth])
+    truth_df = read_truth(inst.truth) if inst.truth is not None else None
+    with Outputs() as outputs:
+        if rrd is not None:
+            loop.sinks.append(recorder(loop.rig, outputs.claim(rrd), truth_df,
+                                       {"mode": inst.mode, "refine": loop.refine.value}))
+        loop.write(outputs.claim(csv), ESTIMATORS[inst.mode])
+    outcome.rows = loop.rows
+    if truth_df is not None and accuracy is not None:
+        ev = evaluate_runs(inst.label, [(read_offsets(csv), truth_df)])
+        axes = list(ev.axes.values())
+        outcome.mae_mm = tuple(1000 * a.mae for a in axes[:3])
+        outcome.max_mm = 1000 * max(a.max_abs for a in axes[:3])
+        write_text(accuracy, evaluation_markdown(ev))
+
+
+def _print_batch(manifest: Path, outcomes: list[Outcome], seconds: float) -> None:
+    """The batch's table, one row per installation, and a line per failure on stderr."""
+    from rich import box
+    from rich.table import Table
+
+    table = Table(title=f"{manifest}: {sum(o.ok for o in outcomes)} of {len(outcomes)} installations re-analysed in "
+                        f"{seconds:.0f} s (errors against the truth in mm)", box=box.SIMPLE_HEAD,
+                  pad_edge=False, collapse_padding=True)
+    for col in ("installation", "frames", "video s", "wall s", "fps", "e_MAE x/y/z", "max mm", "result"):
+        table.add_column(col, justify="left" if col in ("installation", "result") else "right")
+    for o in outcomes:
+        mae = "/".join(f"{v:.1f}" for v in o.mae_mm) if o.mae_mm else "—"
+        table.add_row(o.name, str(o.frames), f"{o.video_s:.1f}", f"{o.wall_s:.1f}",
+                      f"{o.frames / o.wall_s:.0f}" if o.wall_s > 0 and o.frames else "—", mae,
+                      f"{o.max_mm:.0f}" if o.max_mm is not None else "—", "ok" if o.ok else "FAILED")
+    console.print(table)
+    for o in outcomes:
+        if not o.ok:
+            err_console.print(f"topside: {o.name} failed: {o.error}", markup=False)
+
+
+def evaluate(
+    runs: Annotated[list[Path], typer.Argument(help="OFFSETS.csv TRUTH.csv, repeated: runs pooled into one table.")],
+    name: Annotated[str, typer.Option(help="Name of the group of runs (e.g. 'procedures 5, 6, 7').")] = "",
+    markdown: Annotated[Path | None, typer.Option(help="Also write the table as markdown.")] = None,
+    plots: Annotated[Path | None, typer.Option(help="Folder for estimate/truth/error plots per cone.")] = None,
+) -> None:
+    """The paper's accuracy table (e_MAE, |e|max, σ_e, μ_e per axis), RMSE, lag and availability against truth."""
+    from tracking.evaluate import check_overlap, evaluate_runs, evaluation_markdown, plot_run, read_offsets, read_truth
+    from tracking.outputs import write_text
+
+    if len(runs) % 2:
+        raise InputError(runs[-1], "has no truth file after it (expected OFFSETS.csv TRUTH.csv pairs)")
+    check_outputs({"--markdown": markdown}, runs)
+    if plots is not None and plots.exists() and not plots.is_dir():
+        raise InputError(plots, "is a file (expected a folder for the plots)", "--plots")
+    pairs = [(read_offsets(runs[i]), read_truth(runs[i + 1])) for i in range(0, len(runs), 2)]
+    for i, (off, tru) in enumerate(pairs):
+        check_overlap(runs[2 * i], off, runs[2 * i + 1], tru)
+    label = name or ", ".join(str(runs[i].name) for i in range(0, len(runs), 2))
+    ev = evaluate_runs(label, pairs)
+    _print_evaluation(label, ev)
+    if markdown:
+        write_text(markdown, evaluation_markdown(ev))
+    if plots:
+        for i, (off, tru) in enumerate(pairs):
+            for path in plot_run(off, tru, plots, runs[2 * i].stem):
+                console.print(f"wrote {path}")
+
+
+def _print_evaluation(label: str, ev: Evaluation) -> None:
+    """The accuracy table per axis (m), then the lag and the availability."""
+    from rich.table import Table
+
+    from tracking.evaluate import NO_VALUE
+
+    table = Table(title=f"{label} against the truth (m)")
+    for col in ("axis", "e_MAE", "|e|max", "σ_e", "μ_e", "RMSE", "n"):
+        table.add_column(col, justify="right")
+    for axis, s in ev.axes.items():
+        cells = [f"{v:.3f}" if s.n else NO_VALUE for v in (s.mae, s.max_abs, s.std, s.mean, s.rmse)]
+        table.add_row(axis, *cells, str(s.n))
+    console.print(table)
+    lag_text = f"{ev.lag_s:.2f} s" if math.isfinite(ev.lag_s) else f"{NO_VALUE} (no axis moves enough to tell)"
+    console.print(f"lag {lag_text} (cross-correlation) · availability {ev.availability:.1%} "
+                  f"(share of time with an estimate at most 0.5 s old)")
+
+
+def demo(
+    out: Annotated[Path, typer.Option("-o", "--out", help="Folder for the demo's files.")] = Path("recordings"),
+    duration: Annotated[float, typer.Option(help="Seconds of the scenario to simulate.",
+                                            callback=finite(0.0))] = DEMO_DURATION_S,
+    no_viewer: Annotated[bool, typer.Option("--no-viewer", help="Do not open the viewer at the end.")] = False,
+) -> None:
+    """Simulate configuration 2, procedure 5 in fog and rain, track it (fused), record it, print its accuracy."""
+    from tracking.sim.command import run_simulate
+    from viewer.playback import has_display
+
+    scene = out / "demo"
+    console.rule(f"1/3 simulate {DEMO_SCENARIO} ({duration:.0f} s)")
+    run_simulate(DEMO_SCENARIO, scene, seed=None, duration=duration)
+    console.rule("2/3 track (all cameras fused) and record")
+    rrd = out / "demo.rrd"
+    csv = out / "demo-offsets.csv"
+    track(rig=scene / "rig.yaml", out=csv, mode=Mode.FUSED, refine=DEFAULT_REFINEMENT, rrd=rrd,
+          truth=scene / "truth.csv", rejected=False)
+    console.rule("3/3 accuracy against the simulator's truth")
+    evaluate(runs=[csv, scene / "truth.csv"], name="demo", markdown=out / "demo-accuracy.md", plots=None)
+    if not no_viewer and has_display():
+        view(recording=rrd, start=None, end=None, web=False, bind="127.0.0.1")
+    else:
+        console.print(f"open the recording with:  .venv/bin/topside view {rrd}   (or --web for a browser)")
