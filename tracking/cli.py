@@ -19,7 +19,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn
 from tracking.calibration import SUBPIX_WINDOW
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import EXIT_BAD_INPUT, InputError
-from tracking.fusion import ESTIMATORS, FilterReport
+from tracking.estimator import ESTIMATORS, FilterReport
 from tracking.outputs import Outputs, atomic_path, check_outputs
 
 if TYPE_CHECKING:

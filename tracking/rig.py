@@ -24,7 +24,7 @@ FACE_NORMALS must agree with the orientation's z axis within FACE_LABEL_TOLERANC
 A camera may carry a surveyed position: ``position: [x, y, z]``, its optical centre in the jacket frame (m),
 with ``position_sigma``, the survey's σ (m, per axis). The fusion filter takes it as a prior on the camera's
 position when it first places the camera; a survey farther than its σ allows from where the camera's markers
-place it is not applied, and is reported (tracking.fusion, `topside check`).
+place it is not applied, and is reported (tracking.estimator, `topside check`).
 """
 
 from __future__ import annotations
