@@ -66,8 +66,8 @@ CLOCK_GRID_TOLERANCE = 0.25  # an interval more than this share of a frame inter
 # irregular (jitter a stamped device clock shows is far below it)
 CLOCK_MAX_SHARE = 0.05  # more than this share of frames dropped, or of intervals irregular, is a clock problem
 # A residual's σ over a check's frames: the poses' own covariances (for CORNER_SIGMA_PX, the persistent part of a
-# corner's error, as estimator.noise.VIEW_BIAS_PX), its spread over the frames divided by the root of the independent stretches
-# (one per VIEW_BIAS_TAU_S: a view's corner errors stay about that long), and the markers' surveys
+# corner's error, as estimator.noise.VIEW_BIAS_PX), its spread over the frames divided by the root of the independent
+# stretches (one per VIEW_BIAS_TAU_S: a view's corner errors stay about that long), and the markers' surveys
 RIG_SURVEY_SIGMA_M = 0.02  # a marker centre's survey is good to about this, m
 DISAGREE_SIGMAS = 5.0  # a residual beyond this many σ disagrees ...
 MIN_DISAGREE_M = 0.05  # ... when it is also this large: a third of the 150 mm tolerance (a marker's error enters the

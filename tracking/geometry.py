@@ -54,16 +54,30 @@ def rotvec(R: np.ndarray) -> np.ndarray:
     return v if s < 1e-12 else v * (np.arctan2(s, c) / s)
 
 
+def angle(R: np.ndarray) -> float:
+    """Angle (rad) of a rotation (3, 3)."""
+    return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+
+
 def rotation_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
     """Angle (rad) between two rotations (3, 3)."""
-    c = (np.trace(R_a.T @ R_b) - 1.0) / 2.0
-    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+    return angle(R_a.T @ R_b)
+
+
+def rotation_jacobian(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A rotation (3, 3) through its rotation vector, and the derivatives (3, 3, 3) of its entries with respect to
+    that vector's components, dR[k] = ∂R / ∂v_k (OpenCV's analytic Rodrigues Jacobian)."""
+    R_v, dR = cv2.Rodrigues(cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0])
+    return R_v, dR.reshape(3, 3, 3)
 
 
 def quaternion_rotation(q: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation matrix of a quaternion (4,) [w, x, y, z] (Hamilton, scalar first; normalised here)."""
-    w, x, y, z = np.asarray(q, dtype=float)
-    return Rotation.from_quat([x, y, z, w]).as_matrix()
+    """(3, 3) rotation matrix of a quaternion (4,) [w, x, y, z] (Hamilton, scalar first; normalised here). The closed
+    form, as the rigs' markers were measured with."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def quaternions_xyzw(R: np.ndarray) -> np.ndarray:
@@ -158,6 +172,6 @@ def error_covariance(T: np.ndarray, covariance: np.ndarray, T_about: np.ndarray,
 def point_covariance(T: np.ndarray, covariance: np.ndarray, point: np.ndarray) -> np.ndarray:
     """(3, 3) covariance of T's image of a point (3,), from the covariance (6, 6) of T's (rvec, tvec) (OpenCV's
     analytic Rodrigues Jacobian)."""
-    _, dR = cv2.Rodrigues(cv2.Rodrigues(np.asarray(T[:3, :3], dtype=np.float64))[0])
-    J = np.hstack([np.stack([dR[k].reshape(3, 3) @ point for k in range(3)], axis=1), np.eye(3)])
+    _, dR = rotation_jacobian(T[:3, :3])
+    J = np.hstack([np.stack([dR[k] @ point for k in range(3)], axis=1), np.eye(3)])
     return propagate(J, covariance)
