@@ -19,7 +19,7 @@ import pandas as pd
 from mcap.reader import make_reader
 
 from benchmarks.report import write_results
-from tracking.fusion import ESTIMATORS
+from tracking.estimator import ESTIMATORS
 from tracking.pipeline import FrameResult, track_rig
 from tracking.rig import load_rig
 from viewer.archive import ArchiveSink

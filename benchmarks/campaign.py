@@ -38,8 +38,9 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.accuracy import detect, frame, measure
+from tracking.estimator import TopsideFilter, filter_frame, smoothed_estimates
+from tracking.estimator.measurements import frames as _frames
 from tracking.evaluate import truth_at
-from tracking.fusion import TopsideFilter, _frames, filter_frame, smoothed_estimates
 from tracking.rig import load_rig
 
 REPO = Path(__file__).resolve().parents[1]

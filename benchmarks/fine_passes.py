@@ -10,7 +10,7 @@ sharp (the scenarios' default) and with weather.lens_blur 0.7 px, are detected w
 Per variant: the mean outward offset of every (camera, marker, edge) over the run against truth_frames.csv (its
 RMS over those edges and the largest), the mean scale error of every (camera, marker) (RMS over them; the stern
 cameras' depth, hence y, follows it: 1 per mille is 30 mm at 30 m), the median of the markers' RMS corner errors,
-and the live filter's e_MAE and |e|max per axis at the monitored cones (fusion.TopsideFilter on the detections).
+and the live filter's e_MAE and |e|max per axis at the monitored cones (TopsideFilter on the detections).
 
     .venv/bin/python -m benchmarks.fine_passes    # ~2 min with the detections cached (each one not cached:
                                                   # 1-2.5 min on one core); writes benchmarks/results/fine_passes.md
@@ -29,7 +29,7 @@ import tracking.corners
 from benchmarks.accuracy import detect, detections_cache, measure, render, with_mounts
 from benchmarks.fusion_diagnosis import errors, true_corners
 from tests.synthetic import scale_error
-from tracking import fusion
+from tracking.estimator import TopsideFilter
 from tracking.rig import load_rig
 
 RESULTS = Path(__file__).resolve().parent / "results" / "fine_passes.md"
@@ -98,7 +98,7 @@ def run(name: str, pictures: str, passes: int) -> dict:
     rig = with_mounts(load_rig(scene / "rig.yaml"), name)
     truth = pd.read_csv(scene / "truth.csv")
     monitored = sorted({p.cone for p in rig.all_pairs()})
-    err = errors(fusion.TopsideFilter(rig), measure(rig, found), truth, monitored)
+    err = errors(TopsideFilter(rig), measure(rig, found), truth, monitored)
     e = err[["ex", "ey", "ez"]].abs().to_numpy() * 1e3
     stats = corner_stats(found, true_corners(scene, MIN_UNOCCLUDED))
     return {"name": name, "pictures": pictures, "passes": passes, **stats, "mae": e.mean(axis=0), "max": e.max(axis=0),

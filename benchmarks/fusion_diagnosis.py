@@ -28,8 +28,12 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from accuracy import CACHE, RESULTS, RUNS, WEATHER, detections_cache, measure, with_mounts
 
-from tracking import fusion
+from tracking.estimator import TopsideFilter, filter_frame, frames, point_offset_matrix
+from tracking.estimator.measurements import corner_jacobian
+from tracking.estimator.noise import CORNER_NOISE_PX, STATE
+from tracking.estimator.process import Transition
 from tracking.evaluate import truth_at
+from tracking.offsets import BodyObservation
 from tracking.rig import load_rig
 from tracking.sim.transforms import pose_to_T
 from viewer.recording import TRUTH_POSE_AXES
@@ -43,23 +47,23 @@ ONE_FRAME_PRIOR = (1.0,) * 3 + (0.05,) * 3 + (1.0,) * 6  # m, rad: topside t, ω
 Detections = list[tuple[str, float, dict[int, np.ndarray]]]
 
 
-class TrueCameras(fusion.TopsideFilter):
+class TrueCameras(TopsideFilter):
     """The filter with every camera's pose set to the truth at each step (its block decoupled, exact)."""
 
     truth: pd.DataFrame
 
-    def predict(self, time: float, frame=()) -> fusion.Transition:
+    def predict(self, time: float, frame=()) -> Transition:
         F = super().predict(time, frame)
         assert self.x is not None and self.P is not None and self.time is not None
         t = self.truth["time"].to_numpy()
         for name, cam in self.cameras.items():
             cam.T_jacket_camera = pose_to_T(np.array([np.interp(self.time, t, self.truth[f"camera_{name}_{a}"])
                                                       for a in TRUTH_POSE_AXES]))
-            b = slice(cam.index, cam.index + fusion.STATE)
+            b = slice(cam.index, cam.index + STATE)
             self.x[b] = 0.0
             self.P[b, :] = 0.0
             self.P[:, b] = 0.0
-            self.P[b, b] = 1e-12 * np.eye(fusion.STATE)
+            self.P[b, b] = 1e-12 * np.eye(STATE)
         return F
 
 
@@ -95,11 +99,11 @@ def altered(detections: Detections, truth: dict[tuple[str, float, int], np.ndarr
                     for i in found}) for c, t, found in detections]
 
 
-def errors(kf: fusion.TopsideFilter, measurements: list, truth: pd.DataFrame, monitored: list[str]) -> pd.DataFrame:
+def errors(kf: TopsideFilter, measurements: list, truth: pd.DataFrame, monitored: list[str]) -> pd.DataFrame:
     """Per reported estimate at a monitored cone: time, cone, error (m) and σ per axis."""
     rows = []
-    for group in fusion._frames(measurements):
-        for e in fusion.filter_frame(kf, group):
+    for group in frames(measurements):
+        for e in filter_frame(kf, group):
             if e.cone in monitored and np.isfinite(e.offset).all():
                 err = e.offset - truth_at(truth, e.cone, np.array([e.time]))[0]
                 rows.append((e.time, e.cone, *err, *np.sqrt(np.diag(e.covariance))))
@@ -119,22 +123,23 @@ def one_frame_sigmas(rig, measurements: list, df: pd.DataFrame) -> str:
     e = df[["ex", "ey", "ez"]].abs().to_numpy()
     i, axis = np.unravel_index(np.argmax(e), e.shape)
     when, cone = df.iloc[i].time, df.iloc[i].cone
-    kf = fusion.TopsideFilter(rig)
-    last: dict[str, fusion.BodyObservation] = {}
-    for group in fusion._frames(measurements):
+    kf = TopsideFilter(rig)
+    last: dict[str, BodyObservation] = {}
+    for group in frames(measurements):
         if group[0].time > when:
             break
-        fusion.filter_frame(kf, group)
-        last.update({m.camera: m for m in group if isinstance(m, fusion.BodyObservation)})
-    c = fusion.point_offset_matrix(kf.cones[cone])[axis, :6]
+        filter_frame(kf, group)
+        last.update({m.camera: m for m in group if isinstance(m, BodyObservation)})
+    c = point_offset_matrix(kf.cones[cone])[axis, :6]
     out = []
     for name, o in sorted(last.items()):
         cam = kf.cameras[name]
         if cam.T_jacket_camera is None or not kf.topside_placed:
             continue
         columns = [*range(6), *range(cam.index, cam.index + 6)]
-        H = np.vstack([kf.corner_jacobian(cam, marker, o.K, columns)[1] for marker in o.corners])
-        info = H.T @ H / fusion.CORNER_NOISE_PX**2 + np.diag(1.0 / np.square(ONE_FRAME_PRIOR))
+        H = np.vstack([corner_jacobian(kf, cam.T_jacket_camera, cam.index, marker, kf.x, o.K, columns)[1]
+                       for marker in o.corners])
+        info = H.T @ H / CORNER_NOISE_PX**2 + np.diag(1.0 / np.square(ONE_FRAME_PRIOR))
         cov = np.linalg.inv(info)[:6, :6]
         out.append(f"{name} {np.sqrt(c @ cov @ c) * 1e3:.0f}")
     return ", ".join(out) or "—"
@@ -181,12 +186,12 @@ def main() -> None:
         measurements = measure(rig, detections)
         truth = pd.read_csv(scene / "truth.csv")
         monitored = sorted({p.cone for p in rig.all_pairs()})
-        fused = errors(fusion.TopsideFilter(rig), measurements, truth, monitored)
+        fused = errors(TopsideFilter(rig), measurements, truth, monitored)
         oracle = TrueCameras(rig)
         oracle.truth = truth
         exact = errors(oracle, measurements, truth, monitored)
         corners = true_corners(scene)
-        shuffled, white = (errors(fusion.TopsideFilter(rig), measure(rig, altered(detections, corners, how)), truth,
+        shuffled, white = (errors(TopsideFilter(rig), measure(rig, altered(detections, corners, how)), truth,
                                   monitored) for how in ("shuffled", "white"))
         late = fused[fused["time"] > fused["time"].min() + STARTUP_S]
 

@@ -32,8 +32,8 @@ from accuracy import bit_rate, detect, measure, render, scenario_crf, with_mount
 from fusion_diagnosis import MAD_TO_SIGMA, consistency, errors, true_corners
 from report import write_results
 
-from tracking import fusion
 from tracking.camera import load_camera
+from tracking.estimator import TopsideFilter
 from tracking.rig import load_rig
 
 RUNS = ("config1-procedure1", "config2-procedure5", "config2-procedure7")
@@ -78,7 +78,7 @@ def fused_row(job: tuple[str, str]) -> str:
     scene, found = detections(name, CHANGES[label])
     rig = with_mounts(load_rig(scene / "rig.yaml"), name)
     truth = pd.read_csv(scene / "truth.csv")
-    df = errors(fusion.TopsideFilter(rig), measure(rig, found), truth, sorted({p.cone for p in rig.all_pairs()}))
+    df = errors(TopsideFilter(rig), measure(rig, found), truth, sorted({p.cone for p in rig.all_pairs()}))
     e = df[["ex", "ey", "ez"]].abs() * 1e3
     mbps = float(np.mean(bit_rate(rig, truth["time"].max())))
     return (f"| {name} | {label} | {mbps:.1f} | " + " / ".join(f"{v:.0f}" for v in e.max()) + " | "

@@ -28,8 +28,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from accuracy import CACHE, detect, frame, render, z_scores
 
 from tracking.clocks import synced_rig, synchronise
+from tracking.estimator import ESTIMATORS
 from tracking.evaluate import evaluate_runs
-from tracking.fusion import ESTIMATORS, rotvec, skew
+from tracking.geometry import rotvec, skew
 from tracking.offsets import BodyObservation, PairOffset
 from tracking.rig import Rig, load_rig
 from tracking.survey import survey_markers, surveyed_rig

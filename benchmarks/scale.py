@@ -31,7 +31,7 @@ import numpy as np
 from benchmarks.report import write_results
 from benchmarks.scenes import render_scene
 from tracking.detection import DEFAULT_REFINEMENT
-from tracking.fusion import ESTIMATORS
+from tracking.estimator import ESTIMATORS
 from tracking.images import frames
 from tracking.parallel import (
     CHUNK_FRAMES,

@@ -25,7 +25,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from benchmarks.accuracy import detect, measure, render, with_mounts
-from tracking.fusion import SMOOTHER_LAG_S, SMOOTHER_SPAN_S, smoothed_estimates
+from tracking.estimator import smoothed_estimates
+from tracking.estimator.noise import SMOOTHER_LAG_S, SMOOTHER_SPAN_S
 from tracking.rig import Rig, load_rig
 
 RESULTS = Path(__file__).resolve().parent / "results" / "smoother_memory.md"

@@ -33,7 +33,7 @@ from benchmarks.report import write_results
 from benchmarks.scenes import FPS, render_scene
 from tracking.cli.live import LIVE_ESTIMATE_PERIOD_S
 from tracking.detection import DEFAULT_REFINEMENT
-from tracking.fusion import FilterTuning, TopsideFilter, filter_frame
+from tracking.estimator import FilterTuning, TopsideFilter, filter_frame
 from tracking.images import frames
 from tracking.live import LiveTracker
 from tracking.pipeline import CameraTracker

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from tracking.errors import InputError, read_yaml
 from tracking.rig import _format_location
 
-MODES = ("fused", "smoothed", "paper", "raw")  # tracking.fusion.ESTIMATORS' keys (not imported: fusion is heavy)
+MODES = ("fused", "smoothed", "paper", "raw")  # tracking.estimator.ESTIMATORS' keys (not imported: heavy)
 OFFSETS_NAME = "offsets.csv"
 RRD_NAME = "run.rrd"
 ACCURACY_NAME = "accuracy.md"

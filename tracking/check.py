@@ -15,11 +15,11 @@ One CheckReport gathers it (check_rig builds it; the CLI prints it and may recor
   survey's). A camera that sees one marker of each body is checked by the topside's tilt against the jacket (it hangs
   near level): a marker whose face or turn is wrong tilts it. With two markers of a body only, both are named: either
   may be the wrong one.
-- per cone, its σ as the fusion filter (tracking.fusion.TopsideFilter) has it after those seconds, and a verdict:
+- per cone, its σ as the fusion filter (tracking.estimator.TopsideFilter) has it after those seconds, and a verdict:
   ``blind`` (no camera sees a topside marker at it and its σ exceeds the report limit: it would show NO DATA),
   ``weak`` (σ above READY_MAX_SIGMA_M, or above the report limit although seen, or measured by one camera only) or
   ``ready``;
-- per camera the filter never placed, why (tracking.fusion: no jacket marker in view, an ambiguous view nothing has
+- per camera the filter never placed, why (tracking.estimator: no jacket marker in view, an ambiguous view nothing has
   settled yet, corners that do not fit) and so what would let it be placed;
 - the markers' size against marker_size (tracking.scale), from cameras that see two markers of one body or have a
   surveyed position; a warning when nothing fixes the scale; an offset that puts the topside through its cones.
@@ -45,16 +45,9 @@ import numpy as np
 from tracking.camera import CameraModel
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
+from tracking.estimator import TopsideFilter, cone_points, filter_frame, point_offset_matrix
+from tracking.estimator.noise import REPORT_MAX_SIGMA_M, STATE, VIEW_BIAS_TAU_S
 from tracking.filtering import WITHHELD_BELOW, ConeEstimate
-from tracking.fusion import (
-    REPORT_MAX_SIGMA_M,
-    STATE,
-    VIEW_BIAS_TAU_S,
-    TopsideFilter,
-    cone_points,
-    filter_frame,
-    point_offset_matrix,
-)
 from tracking.images import Frame, VideoHealth
 from tracking.offsets import MAX_PAIR_TILT_RAD, BodyObservation, PairOffset
 from tracking.pipeline import CameraTracker, FrameResult
@@ -73,8 +66,8 @@ CLOCK_GRID_TOLERANCE = 0.25  # an interval more than this share of a frame inter
 # irregular (jitter a stamped device clock shows is far below it)
 CLOCK_MAX_SHARE = 0.05  # more than this share of frames dropped, or of intervals irregular, is a clock problem
 # A residual's σ over a check's frames: the poses' own covariances (for CORNER_SIGMA_PX, the persistent part of a
-# corner's error, as fusion.VIEW_BIAS_PX), its spread over the frames divided by the root of the independent stretches
-# (one per VIEW_BIAS_TAU_S: a view's corner errors stay about that long), and the markers' surveys
+# corner's error, as estimator.noise.VIEW_BIAS_PX), its spread over the frames divided by the root of the independent
+# stretches (one per VIEW_BIAS_TAU_S: a view's corner errors stay about that long), and the markers' surveys
 RIG_SURVEY_SIGMA_M = 0.02  # a marker centre's survey is good to about this, m
 DISAGREE_SIGMAS = 5.0  # a residual beyond this many σ disagrees ...
 MIN_DISAGREE_M = 0.05  # ... when it is also this large: a third of the 150 mm tolerance (a marker's error enters the
@@ -179,7 +172,7 @@ class CameraCheck:
     survey_conflict: bool = False  # the filter refused the survey as beyond its σ
     first_frame: Frame | None = None  # its first frame (for the recording)
     model: CameraModel | None = None  # its calibration (sized by the first frame when the file gave no size)
-    unplaced: str = ""  # why the fusion filter never placed it (tracking.fusion CameraState.waiting); empty: placed
+    unplaced: str = ""  # why the fusion filter never placed it (tracking.estimator CameraState.waiting); empty: placed
 
     @property
     def problems(self) -> list[str]:

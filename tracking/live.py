@@ -21,8 +21,8 @@ import cv2
 
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
+from tracking.estimator import FilterTuning, TopsideFilter, filter_frame
 from tracking.filtering import ConeEstimate
-from tracking.fusion import FilterTuning, TopsideFilter, filter_frame
 from tracking.pipeline import CameraTracker, FrameResult
 from tracking.rig import Rig, load_rig
 from tracking.sources import (

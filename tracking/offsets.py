@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from tracking.camera import CameraModel
+from tracking.geometry import angle, rotation_jacobian
 from tracking.pose import BodyPose, Choice, MarkerPose, estimate_body_pose
 from tracking.rig import Pair, Rig
 from tracking.scale import ScaleSample, separation_sample
@@ -42,10 +42,6 @@ def relative_pose(T_camera_W: np.ndarray, T_camera_S: np.ndarray) -> np.ndarray:
     return T
 
 
-def _rotation_angle(R: np.ndarray) -> float:
-    return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
-
-
 def resolve_pair(W: MarkerPose, S: MarkerPose, T_W_S_mated: np.ndarray) -> tuple[MarkerPose, MarkerPose]:
     """Settle IPPE ambiguities of a pair: the two markers are near parallel, so pick the combination that agrees."""
     if W.choice == Choice.UNIQUE and S.choice == Choice.UNIQUE:
@@ -54,7 +50,7 @@ def resolve_pair(W: MarkerPose, S: MarkerPose, T_W_S_mated: np.ndarray) -> tuple
     for i in range(2):
         for j in range(2):
             rel = relative_pose(W.solutions[i].T_camera_marker, S.solutions[j].T_camera_marker)
-            tilt = _rotation_angle(T_W_S_mated[:3, :3].T @ rel[:3, :3])
+            tilt = angle(T_W_S_mated[:3, :3].T @ rel[:3, :3])
             cost = (tilt, W.solutions[i].reprojection_error + S.solutions[j].reprojection_error)
             if best is None or cost < best[0]:
                 best = (cost, i, j)
@@ -91,10 +87,10 @@ def offset_jacobian(geometry: PairGeometry, T_camera_W: np.ndarray, T_camera_S: 
     """(3, 12) derivative of the offset R_jacket_W (R_camera_W^T (t_S - t_W) - t_mated) with respect to
     (rvec_W, tvec_W, rvec_S, tvec_S): analytic, through the Jacobian of OpenCV's Rodrigues (the offset does not
     depend on the topside marker's rotation)."""
-    R_cw, dR = cv2.Rodrigues(cv2.Rodrigues(np.asarray(T_camera_W[:3, :3], dtype=np.float64))[0])
+    R_cw, dR = rotation_jacobian(T_camera_W[:3, :3])
     d = T_camera_S[:3, 3] - T_camera_W[:3, 3]
     J = np.zeros((3, 12))
-    J[:, 0:3] = geometry.R_jacket_W @ np.stack([dR[k].reshape(3, 3).T @ d for k in range(3)], axis=1)
+    J[:, 0:3] = geometry.R_jacket_W @ np.stack([dR[k].T @ d for k in range(3)], axis=1)
     J[:, 9:12] = geometry.R_jacket_W @ R_cw.T
     J[:, 3:6] = -J[:, 9:12]
     return J

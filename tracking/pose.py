@@ -10,6 +10,7 @@ import numpy as np
 
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetection
+from tracking.geometry import rt_to_T, rvec_tvec
 
 AMBIGUITY_RATIO = 1.5  # a pose is unambiguous only when the other IPPE solution reprojects this much worse ...
 CORNER_SIGMA_PX = 0.08  # corner noise floor: RMS of the edge-fit corners over all conditions (corners.md)
@@ -28,14 +29,6 @@ def marker_object_points(size: float) -> np.ndarray:
     """(4, 3) marker corners TL TR BR BL in the marker frame (x right, y up, z out of the face)."""
     h = size / 2.0
     return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
-
-
-def rt_to_T(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
-    """Rotation vector (3,) and translation (3,) to a (4, 4) transform."""
-    T = np.eye(4)
-    T[:3, :3] = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3))[0]
-    T[:3, 3] = np.asarray(tvec, dtype=np.float64).reshape(3)
-    return T
 
 
 @dataclass(frozen=True)
@@ -137,20 +130,16 @@ def body_object_points(T_body_markers: list[np.ndarray], size: float) -> np.ndar
     return np.concatenate([(T[:3, :3] @ obj.T).T + T[:3, 3] for T in T_body_markers])
 
 
-def _rvec_tvec(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return cv2.Rodrigues(T[:3, :3])[0].reshape(3), T[:3, 3].copy()
-
-
 def _residuals(obj: np.ndarray, ideal: np.ndarray, T: np.ndarray, K: np.ndarray) -> np.ndarray:
     """(N,) reprojection distances of object points under T_camera_body, px."""
-    r, t = _rvec_tvec(T)
+    r, t = rvec_tvec(T)
     proj, _ = cv2.projectPoints(obj, r, t, K, None)
     return np.linalg.norm(proj.reshape(-1, 2) - ideal, axis=1)
 
 
 def _fit(obj: np.ndarray, ideal: np.ndarray, T0: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Levenberg-Marquardt refinement of T_camera_body (4, 4) from an initial guess."""
-    r, t = _rvec_tvec(T0)
+    r, t = rvec_tvec(T0)
     r, t = cv2.solvePnPRefineLM(obj, ideal.reshape(-1, 1, 2), K, None, r.reshape(3, 1), t.reshape(3, 1))
     return rt_to_T(r, t)
 
@@ -173,7 +162,7 @@ def estimate_body_pose(body: str, poses: list[MarkerPose], T_body_markers: list[
         sols = []
         for s in (p.solutions[p.chosen], p.solutions[1 - p.chosen]):
             T = s.T_camera_marker @ T_bm_inv
-            r, t = _rvec_tvec(T)
+            r, t = rvec_tvec(T)
             sols.append((T, pose_covariance(obj, r, t, K, max(CORNER_SIGMA_PX, s.reprojection_error))))
         alternatives = () if p.choice == Choice.UNIQUE else (sols[1],)
         return BodyPose(body, ids, sols[0][0], sols[0][1], p.reprojection_error, p.choice, alternatives)
@@ -196,6 +185,6 @@ def estimate_body_pose(body: str, poses: list[MarkerPose], T_body_markers: list[
         T = _fit(obj[keep], ideal[keep], T, K)
     res = _residuals(obj[keep], ideal[keep], T, K)
     rms = float(np.sqrt(np.mean(res**2)))
-    r, t = _rvec_tvec(T)
+    r, t = rvec_tvec(T)
     cov = pose_covariance(obj[keep], r, t, K, max(CORNER_SIGMA_PX, rms))
     return BodyPose(body, ids, T, cov, rms, Choice.UNIQUE, (), int((~keep).sum()))

@@ -24,7 +24,7 @@ FACE_NORMALS must agree with the orientation's z axis within FACE_LABEL_TOLERANC
 A camera may carry a surveyed position: ``position: [x, y, z]``, its optical centre in the jacket frame (m),
 with ``position_sigma``, the survey's σ (m, per axis). The fusion filter takes it as a prior on the camera's
 position when it first places the camera; a survey farther than its σ allows from where the camera's markers
-place it is not applied, and is reported (tracking.fusion, `topside check`).
+place it is not applied, and is reported (tracking.estimator, `topside check`).
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from tracking.errors import InputError, read_yaml
+from tracking.geometry import nearest_rotation, quaternion_rotation, transform
 from tracking.outputs import write_text
 
 MAX_COORDINATE_M = 1e6  # an installation spans tens of metres; this bound only keeps every product finite
@@ -112,20 +113,6 @@ def turned(R: np.ndarray, degrees: float) -> np.ndarray:
     a = np.deg2rad(degrees)
     c, s = np.cos(a), np.sin(a)
     return np.asarray(R, dtype=float) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def quaternion_rotation(q: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation matrix of a unit quaternion (4,) [w, x, y, z] (Hamilton, scalar first)."""
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
-def nearest_rotation(R: np.ndarray) -> np.ndarray:
-    """The rotation (3, 3) nearest a near-orthonormal matrix (3, 3) (polar decomposition by SVD)."""
-    U, _, Vt = np.linalg.svd(np.asarray(R, dtype=float))
-    return U @ Vt
 
 
 def rotation_problem(R: np.ndarray) -> str | None:
@@ -238,9 +225,7 @@ class Marker(_Model):
     @cached_property
     def T_body_marker(self) -> np.ndarray:
         """(4, 4) pose of the marker in its body's frame; computed once (the model is frozen), read-only."""
-        T = np.eye(4)
-        T[:3, :3] = self.R_body_marker
-        T[:3, 3] = self.center
+        T = transform(self.R_body_marker, self.center)
         T.flags.writeable = False
         return T
 

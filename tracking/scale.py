@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-EVIDENCE_TAU_S = 0.5  # s: a view's corner errors stay about this long (fusion.VIEW_BIAS_TAU_S)
+EVIDENCE_TAU_S = 0.5  # s: a view's corner errors stay about this long (estimator.noise.VIEW_BIAS_TAU_S)
 MIN_SEPARATION_M = 1.0  # markers closer than this give little evidence of scale
 MAX_OFF_NORMAL_DEG = 60.0  # a marker seen further off its normal measures its distance poorly and with a bias the
 # corner noise does not explain (a drone's marker 77° off read two markers 7 % too far apart at a stated 1.6 %)

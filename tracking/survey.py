@@ -44,13 +44,13 @@ from tracking.clocks import (
     motion_prior_rows,
 )
 from tracking.errors import InputError
-from tracking.fusion import CORNER_NOISE_PX, VIEW_BIAS_PX
+from tracking.estimator.noise import CORNER_NOISE_PX, VIEW_BIAS_PX
 from tracking.offsets import BodyObservation, PairOffset
 from tracking.pose import Choice, marker_object_points
 from tracking.rig import Marker, Pair, Rig, SurveyCorrection, SurveySigma
 
 CORRELATED_FRAMES = 15  # a view's corner errors last about this many frames (a second at 15 FPS: the sub-pixel phase
-# of a marker's edges and the stream's coding of a still picture; tracking.fusion's view biases): its frames count
+# of a marker's edges and the stream's coding of a still picture; tracking.estimator's view biases): its frames count
 # as one in this many. Taken as independent, a minute of a camera at 40 m moved the markers it saw by 80-110 mm at a
 # stated σ of 13 mm (config2-procedure5-realities)
 FIT_NOISE_PX = CORNER_NOISE_PX * float(np.sqrt(CORRELATED_FRAMES))  # the corners' σ in the fit (CORNER_NOISE_PX:

@@ -55,8 +55,8 @@ from mcap.writer import CompressionType, IndexType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from tracking.camera import CameraModel
+from tracking.estimator import cone_points
 from tracking.filtering import ConeEstimate
-from tracking.fusion import cone_points
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
 from viewer.manifest import (

@@ -239,7 +239,7 @@ def concentricity_label(cone: str, estimate: ConeEstimate) -> str:
 
 def log_concentricity(rec: rr.RecordingStream, points: Mapping[str, np.ndarray], estimates: list[ConeEstimate]
                       ) -> None:
-    """Each cone's line from its point on the jacket (the tip: tracking.fusion.cone_points) to the topside's (point +
+    """Each cone's line from its point on the jacket (the tip: tracking.estimator.cone_points) to the topside's (point +
     offset) over time, columnar: green within the tolerance, red beyond; estimates without every axis left out."""
     for cone in sorted({e.cone for e in estimates} & set(points)):
         batch = [e for e in estimates if e.cone == cone and np.all(np.isfinite(e.offset))]

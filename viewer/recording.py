@@ -25,8 +25,8 @@ import pandas as pd
 import rerun as rr
 
 from tracking.camera import CameraModel
+from tracking.estimator import point_offset_matrix
 from tracking.filtering import ConeEstimate
-from tracking.fusion import point_offset_matrix
 from tracking.images import Frame, VideoHealth
 from tracking.pipeline import FrameResult
 from tracking.pose import Choice, MarkerPose

@@ -20,9 +20,9 @@ import rerun.blueprint as rrb
 
 from tracking.camera import CameraModel, load_camera
 from tracking.errors import InputError
+from tracking.estimator import cone_points
 from tracking.evaluate import truth_at
 from tracking.filtering import ConeEstimate
-from tracking.fusion import cone_points
 from tracking.images import Frame
 from tracking.live import STALE_S, LiveUpdate
 from tracking.outputs import partial_path, write_text

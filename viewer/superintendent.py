@@ -27,8 +27,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_M
 from tracking.filtering import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
-from tracking.fusion import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_M
 from tracking.live import STALE_S, CameraHealth
 from tracking.rig import Rig
 from tracking.sources import CameraState

@@ -7,7 +7,7 @@ import pytest
 
 from tests.synthetic import look_at
 from tests.tracking.test_fusion import CAMERA_EYES, camera_rig, observations
-from tracking.fusion import TopsideFilter
+from tracking.estimator import TopsideFilter
 from tracking.rig import Rig
 
 FAR_TRUE = look_at(CAMERA_EYES["far"], np.array([12.0, -10.0, 0.0]))[:3, 3]  # the far camera's optical centre

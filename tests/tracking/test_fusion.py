@@ -9,16 +9,10 @@ import pytest
 
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetection
+from tracking.estimator import TopsideFilter, fused_estimates, smoothed_estimates
+from tracking.estimator.noise import REPORT_WARMUP_S, VIEW_BIAS_TAU_S
 from tracking.filtering import WITHHELD_CLOCKS
-from tracking.fusion import (
-    REPORT_WARMUP_S,
-    VIEW_BIAS_TAU_S,
-    TopsideFilter,
-    fused_estimates,
-    rotation,
-    rotvec,
-    smoothed_estimates,
-)
+from tracking.geometry import rotation, rotvec
 from tracking.offsets import BodyObservation, PairOffset, body_geometry, observe_bodies
 from tracking.pose import Choice, estimate_pose, marker_object_points
 from tracking.rig import Rig
@@ -319,7 +313,7 @@ def test_a_camera_gets_the_process_noise_its_images_show() -> None:
 
 def test_warming_up_the_filter_reports_only_tight_cones() -> None:
     """For REPORT_WARMUP_S after the topside is placed a cone is shown only with σ ≤ 25 mm, then up to 50 mm."""
-    from tracking.fusion import REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_M
+    from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_M
 
     the_rig = camera_rig()
     kf = TopsideFilter(the_rig)
@@ -338,7 +332,7 @@ def test_warming_up_the_filter_reports_only_tight_cones() -> None:
 
 def test_the_smoother_warms_up_as_the_live_filter() -> None:
     """The smoother's first seconds rest on the same first frames: it too withholds cones wider than 25 mm there."""
-    from tracking.fusion import REPORT_WARMUP_SIGMA_M
+    from tracking.estimator.noise import REPORT_WARMUP_SIGMA_M
 
     the_rig = camera_rig()
     obs = observations(the_rig, 6.0)
@@ -439,7 +433,7 @@ def test_a_views_bias_stays_while_its_image_stays() -> None:
 def test_a_view_with_a_corner_off_does_not_place_a_camera() -> None:
     """A camera is placed only by a view whose pose fits its corners to within their noise: with one corner 2.7 px
     off (a rain hit) its first view leaves it unplaced, and the next, clean one places it."""
-    from tracking.fusion import fits_its_corners
+    from tracking.estimator.noise import fits_its_corners
 
     the_rig = camera_rig("vessel")
     camera = CameraModel(K, np.zeros(5), 920, 600)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import FRAMES
-from tracking.fusion import fused_estimates
+from tracking.estimator import fused_estimates
 from tracking.images import Frame
 from tracking.live import LiveTracker
 from tracking.pipeline import track_rig

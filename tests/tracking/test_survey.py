@@ -7,7 +7,8 @@ import pytest
 
 from tests.synthetic import CAMERA_EYES, CONE_A, JACKET_MARKER_Z, MATED_RISE, PAPER_K, look_at, rig_dict
 from tracking.errors import InputError
-from tracking.fusion import TopsideFilter, rotvec
+from tracking.estimator import TopsideFilter
+from tracking.geometry import rotvec
 from tracking.offsets import BodyObservation
 from tracking.pose import BodyPose, Choice, marker_object_points
 from tracking.rig import Rig
@@ -128,7 +129,7 @@ def with_topside(o: BodyObservation) -> BodyObservation:
 
 
 def test_the_filter_carries_the_survey_sigma_and_holds_the_error_inside_it() -> None:
-    from tracking.fusion import fused_estimates
+    from tracking.estimator import fused_estimates
 
     obs = [with_topside(o) for o in observations(rig())]  # markers 3 and 4 truly 18-25 mm and about 1° off the rig
     exact = TopsideFilter(rig(survey=False))
@@ -170,7 +171,7 @@ def test_consider_states_are_never_estimated() -> None:
 
 
 def test_without_a_datum_the_surveyed_rig_keeps_what_no_footage_can_tell() -> None:
-    from tracking.fusion import fused_estimates
+    from tracking.estimator import fused_estimates
 
     the_rig = rig(references=())  # markers 3 and 4 truly 18-25 mm and about 1° off; no marker held as a datum
     obs = observations(the_rig)

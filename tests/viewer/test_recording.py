@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import rerun as rr
 
-from tracking.fusion import point_offset_matrix
+from tracking.estimator import point_offset_matrix
 from viewer.readback import chunks_by_entity, component_rows
 from viewer.recording import log_topside_poses, topside_pose
 

@@ -28,9 +28,10 @@ from dataclasses import dataclass, field
 from itertools import permutations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-EVIDENCE_TAU_S = 0.5  # s: a view's corner errors stay about this long (fusion.VIEW_BIAS_TAU_S)
+from tracking.geometry import between
+
+EVIDENCE_TAU_S = 0.5  # s: a view's corner errors stay about this long (estimator.noise.VIEW_BIAS_TAU_S)
 DECISIVE_CHI2 = 13.8  # 2 ln 1000: the evidence for one option over the next that places the camera
 EVIDENCE_CAP = 2.0  # a frame's topside χ² counts up to this many times its gate (χ² 99.9 % of its corners): beyond,
 # the option is wrong whatever the number, and one frame of a topside just placed (and off) must not outweigh the rest;
@@ -123,19 +124,3 @@ def best_pose(poses: list[tuple[float, np.ndarray]]) -> np.ndarray:
         return min(scored, key=lambda item: item[0])[1]
     return between([T for _, T in poses])
 
-
-def between(poses: list[np.ndarray]) -> np.ndarray:
-    """(4, 4) the pose midway between poses (4, 4) close to each other: mean rotation vector about the first, mean
-    translation."""
-    R_0 = poses[0][:3, :3]
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_rotvec(np.mean([Rotation.from_matrix(P[:3, :3] @ R_0.T).as_rotvec() for P in poses],
-                                             axis=0)).as_matrix() @ R_0
-    T[:3, 3] = np.mean([P[:3, 3] for P in poses], axis=0)
-    return T
-
-
-def rotation_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
-    """Angle (rad) between two rotations (3, 3)."""
-    c = (np.trace(R_a.T @ R_b) - 1.0) / 2.0
-    return float(np.arccos(np.clip(c, -1.0, 1.0)))

@@ -1,0 +1,242 @@
+"""The Kalman filter of one installation: the topside and every camera, measured by their markers' corners.
+
+Each camera frame is applied at its capture time (cameras need no synchronisation): the state predicted to it
+(tracking.estimator.process), the camera placed at its first jacket view and the topside at its first view through a
+placed camera (tracking.estimator.placement), then the frame's jacket corners refine the camera and its topside corners,
+through the camera just refined, the topside (tracking.estimator.measurements). Pair offsets are accepted too. The
+offset at every cone follows from the topside pose, including cones no camera sees (cone_estimates); a cone whose σ
+says it cannot be known, or whose offset only a rig error explains, is withheld with the reason.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracking.estimator.measurements import Measurement, corner_update, nearest, pair_rows, renew
+from tracking.estimator.noise import (
+    AMBIGUOUS_VARIANCE_GAIN,
+    CAMERA_RATE_TAU_S,
+    CONTRIBUTION_WINDOW_S,
+    GATE_CHI2,
+    MEASUREMENT_FLOOR_M,
+    MOTION_FLOOR,
+    REINIT_AFTER_REJECTS,
+    REPORT_MAX_SIGMA_M,
+    REPORT_WARMUP_S,
+    REPORT_WARMUP_SIGMA_M,
+    STATE,
+    camera_process_noise,
+    prior_covariance,
+    process_noise,
+)
+from tracking.estimator.placement import place_camera, place_topside
+from tracking.estimator.process import Transition, rate_decay
+from tracking.estimator.state import CameraState, FilterState, point_offset_matrix
+from tracking.filtering import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
+from tracking.geometry import numeric_jacobian, pose_params, rotation
+from tracking.offsets import BodyObservation
+from tracking.pose import Choice
+from tracking.scale import ScaleEvidence, below_cones, survey_sample
+
+
+class TopsideFilter(FilterState):
+    """The Kalman filter of one installation: the topside and every camera of the rig."""
+
+    def predict(self, time: float, frame: Sequence[Measurement] = ()) -> Transition:
+        """Move the state to a capture time and renew the corner biases of the views a frame's body observations will
+        measure, by how far their markers' images moved; returns the transition used."""
+        dt = 0.0 if self.time is None else max(0.0, time - self.time)
+        blocks = 1 + len(self.cameras)
+        a_cam, b_cam = rate_decay(dt, CAMERA_RATE_TAU_S)  # the topside keeps its speed, cameras' rates revert
+        a, b = np.full((blocks, 6), a_cam), np.full((blocks, 6), b_cam)
+        a[0], b[0] = 1.0, dt
+        noise = np.zeros((blocks, STATE, STATE))
+        noise[0] = process_noise(dt, self.tuning)
+        for k, cam in enumerate(self.cameras.values()):
+            if cam.T_jacket_camera is not None:
+                noise[1 + k] = camera_process_noise(dt, self.tuning, cam.mount, cam.motion_scale)
+        bodies = Transition(a, b, noise, np.ones(self.size - self.body_size))
+        self.x = bodies.apply(self.x[:, None])[:, 0]
+        self.P = bodies.covariance(self.P)
+        self.fold_cameras()
+        self.time = time if self.time is None else max(self.time, time)
+        keep = renew(self, [o for o in frame if isinstance(o, BodyObservation)])
+        return Transition(a, b, noise, keep)
+
+    def update(self, m: Measurement) -> bool:
+        """Apply one measurement; False when (its topside part) was gated out or could not be used."""
+        if isinstance(m, BodyObservation):
+            return self.observe(m)
+        if not self.last_accepted and m.choice == Choice.AMBIGUOUS:
+            return False  # never start from a pose IPPE could not settle: nothing could gate it
+        H = pair_rows(self, m)
+        gain = AMBIGUOUS_VARIANCE_GAIN if m.choice == Choice.AMBIGUOUS else 1.0
+        candidates = [(o - H @ self.x, c) for o, c in ((m.offset, m.covariance), *m.alternatives)]
+        d2, y, R = nearest(self.P, candidates, H, gain, MEASUREMENT_FLOOR_M**2 * np.eye(3))
+        if not np.isfinite(d2) or d2 > GATE_CHI2[3]:
+            self._topside_rejected()
+            return False
+        self.apply(H, y, R)
+        self.consecutive_rejects = 0
+        self.last_accepted[m.camera] = m.time
+        if self.placed_at is None:
+            self.placed_at = m.time
+        return True
+
+    def _topside_rejected(self) -> None:
+        self.rejected += 1
+        self.consecutive_rejects += 1
+        if self.consecutive_rejects >= REINIT_AFTER_REJECTS:  # lost: reopen, keep the state
+            self.P[:STATE, :STATE] += prior_covariance(self.tuning)
+            self.consecutive_rejects = 0
+
+    def observe(self, o: BodyObservation) -> bool:
+        """Apply one camera frame's marker corners; False when no topside corner of it was used.
+
+        The corners are measured directly: each marker's four corners (8 pixel coordinates) against
+        their projection through the camera's and the topside's poses in the state. The IPPE
+        ambiguity of a lone marker never arises; poses only place a camera or the topside at first sight.
+        """
+        cam = self.cameras.get(o.camera)
+        if cam is None:
+            return False
+        self._measure_scale(o)
+        if cam.T_jacket_camera is None:
+            if o.jacket is None:
+                cam.waiting = "no jacket marker of the rig in its view (a camera is placed by the jacket's markers)"
+                return False
+            if not place_camera(self, cam, o):
+                return False
+        if not self.topside_placed and (o.topside is None or not place_topside(self, cam, o.topside)):
+            o = BodyObservation(o.time, o.camera, o.jacket, None,
+                                {i: c for i, c in o.corners.items() if i in self.jacket_corners}, o.K)
+        jacket = {i: z for i, z in o.corners.items() if i in self.jacket_corners}
+        self._measure_motion(cam, o.time, jacket, o.K)
+        topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
+        renew(self, [o])  # when predict was not given the frame
+        used_jacket = corner_update(self, cam, jacket, o.K, False, o.time)  # the camera first, then the topside
+        used_topside = corner_update(self, cam, topside, o.K, True, o.time)  # through the camera just refined
+        if o.jacket is not None:
+            self._camera_refused(cam, used_jacket)
+        if o.topside is not None and self.topside_placed and not used_topside:
+            self.consecutive_rejects += 1
+            if self.consecutive_rejects >= REINIT_AFTER_REJECTS:  # lost: place it again at its next view
+                self.topside_placed = False
+                self.consecutive_rejects = 0
+        if used_topside:
+            self.consecutive_rejects = 0
+            self.last_accepted[o.camera] = o.time
+        return used_topside
+
+    def _camera_refused(self, cam: CameraState, used: bool) -> None:
+        """Count a camera's jacket views refused in a row; at REINIT_AFTER_REJECTS it is lost, placed again later."""
+        cam.consecutive_rejects = 0 if used else cam.consecutive_rejects + 1
+        if cam.consecutive_rejects >= REINIT_AFTER_REJECTS:
+            cam.T_jacket_camera = None
+            cam.waiting = f"lost: its jacket corners were refused {REINIT_AFTER_REJECTS} frames in a row"
+            self.reset_camera(cam)
+
+    def _measure_motion(self, cam: CameraState, time: float, jacket: dict[int, np.ndarray], K: np.ndarray) -> None:
+        """A frame's jacket corners into the camera's motion level; its process noise scaled to that level."""
+        prior = self.tuning.motion(cam.mount)
+        if not prior.adapts or not jacket:
+            return
+        cam.motion.add(time, jacket, float(K[0, 0] + K[1, 1]) / 2)
+        if cam.motion.level is not None:
+            cam.motion_scale = float(np.clip(cam.motion.level / prior.angular_accel_psd, MOTION_FLOOR, 1.0))
+
+    def _measure_scale(self, o: BodyObservation) -> None:
+        """A frame's evidence of the markers' size: two markers of one body in it, and a surveyed camera's distance to
+        its jacket marker (the same for both IPPE options)."""
+        for sample in o.scale:
+            self.scale.add(sample, o.time)
+        if o.camera not in self.surveys or o.jacket is None:
+            return
+        position, sigma = self.surveys[o.camera]
+        T, cov = o.jacket.T_camera_body, o.jacket.covariance
+        for i in o.jacket.marker_ids:
+            c = self.centres[i]
+
+            def distance(p: np.ndarray, c: np.ndarray = c) -> np.ndarray:
+                return np.array([np.linalg.norm(rotation(p[:3]) @ c + p[3:])])
+
+            p0 = pose_params(T)
+            J = numeric_jacobian(distance, p0)
+            sample = survey_sample(o.camera, i, float(distance(p0)[0]), float(np.sqrt(J @ cov @ J.T)[0, 0]),
+                                   float(np.linalg.norm(position - c)), sigma)
+            if sample is not None:
+                self.scale.add(sample, o.time)
+
+    def clock_bound(self, cameras: tuple[str, ...]) -> float:
+        """σ, s, of the time an estimate resting on these cameras (all when none) is the topside's: the largest of their
+        clocks' (rig: time_offset_sigma), a bound whatever their weights and signs. Weighing each camera by its share
+        of the topside's information instead left errors outside 2σ where a synced drone's share was large."""
+        return max((self.clock_sigma.get(c, 0.0) for c in cameras or self.clock_sigma), default=0.0)
+
+    def contributing(self) -> tuple[str, ...]:
+        """Cameras accepted within CONTRIBUTION_WINDOW_S of the current time."""
+        now = self.time if self.time is not None else -np.inf
+        return tuple(sorted(c for c, t in self.last_accepted.items() if now - t <= CONTRIBUTION_WINDOW_S))
+
+    def warming(self) -> bool:
+        """Whether the filter is within REPORT_WARMUP_S of the topside's (last) placement."""
+        return self.placed_at is None or self.time is None or self.time - self.placed_at < REPORT_WARMUP_S
+
+    def cone_estimates(self, x: np.ndarray | None = None, P: np.ndarray | None = None,
+                       time: float | None = None, cameras: tuple[str, ...] | None = None,
+                       warming: bool | None = None) -> list[ConeEstimate]:
+        """Offset and covariance at every cone from a state (default: the current one), withholding cones whose σ
+        exceeds REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_M while warming (default: whether the filter is now); from
+        the current state, with the placed cameras' poses (a past state's are relative to nominals since moved)."""
+        poses = None if x is not None else {name: self.camera_pose(cam) for name, cam in self.cameras.items()
+                                            if cam.T_jacket_camera is not None}
+        x = self.x if x is None else x
+        P = self.P if P is None else P
+        time = (self.time if time is None else time) or 0.0
+        cameras = self.contributing() if cameras is None else cameras
+        limit = REPORT_WARMUP_SIGMA_M if (self.warming() if warming is None else warming) else REPORT_MAX_SIGMA_M
+        clock = self.clock_bound(cameras)
+        out = []
+        for cone, r in sorted(self.cones.items()):
+            H = point_offset_matrix(r)
+            cov = timed = H @ P[:STATE, :STATE] @ H.T
+            if clock:  # the estimate is the topside's at a time its cameras' clocks hold to σ: its motion over it
+                speed, rates = H[:, :6] @ x[6:STATE], H[:, :6] @ P[6:STATE, 6:STATE] @ H[:, :6].T
+                cov = cov + clock**2 * (np.outer(speed, speed) + rates)
+            offset = H @ x[:STATE]
+            withheld = self._withheld(offset, cov, timed, limit)
+            offset = np.full(3, np.nan) if withheld else offset
+            out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))
+        return out
+
+    def _withheld(self, offset: np.ndarray, cov: np.ndarray, timed: np.ndarray, limit: float) -> str:
+        """Why a cone's offset (3,) of covariance cov (3, 3) is not shown (empty: it is): a rig error, or σ beyond
+        limit (the clocks' fault when its covariance with exact clocks, timed, would have been shown)."""
+        if self.scale.mismatch:  # every offset scaled
+            return WITHHELD_SCALE
+        if below_cones(float(offset[2]), float(np.sqrt(cov[2, 2]))):  # no set-down can be there
+            self.below = (self.below[0] + 1, min(self.below[1], float(offset[2])))
+            return WITHHELD_BELOW
+        if np.sqrt(np.diag(cov)).max() > limit:
+            return WITHHELD_CLOCKS if np.sqrt(np.diag(timed)).max() <= limit else WITHHELD_SIGMA
+        return ""
+
+
+@dataclass
+class FilterReport:
+    """What a run of the filter found besides its estimates, taken when the run ends: the cameras it never placed and
+    why (each camera's CameraState.waiting), the markers' size against the rig's (tracking.scale), and the offsets it
+    withheld for putting the topside through its cones."""
+
+    unplaced: dict[str, str] = field(default_factory=dict)
+    scale: ScaleEvidence = field(default_factory=ScaleEvidence)
+    below: tuple[int, float] = (0, 0.0)  # estimates withheld as the topside through its cones, and the deepest Δz, m
+
+    def take(self, kf: TopsideFilter) -> None:
+        """The findings of a filter at the end of its run."""
+        self.unplaced = {name: cam.waiting for name, cam in kf.cameras.items() if cam.placed_at is None}
+        self.scale = kf.scale
+        self.below = kf.below

@@ -1,0 +1,130 @@
+"""The filter's noise model: every σ, gate and time constant, and the process noise of the topside and the cameras.
+
+One place for the numbers the estimator, the survey (tracking.survey) and the readiness check (tracking.check) share.
+Evidence for each is in docs/method.md#the-filters-constants. Units: metres, radians, seconds, pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from statistics import NormalDist
+
+import numpy as np
+
+from tracking.pose import BodyPose
+
+STATE = 12  # per body: pose (6) and rates (6)
+GATE_CHI2 = {3: 16.27, 6: 22.46}  # by degrees of freedom, 99.9 %
+REINIT_AFTER_REJECTS = 15  # consecutive gated measurements before the filter reopens a covariance
+CONTRIBUTION_WINDOW_S = 0.5  # a camera counts as contributing when it was accepted this recently
+AMBIGUOUS_VARIANCE_GAIN = 25.0  # σ × 5 for poses IPPE could not settle: their error is bimodal, not Gaussian
+MEASUREMENT_FLOOR_M = 0.01  # σ added to every measured position: biases corner noise does not explain (far markers'
+# tilt, first-order rotation, timing); evidence in docs/method.md#the-filters-constants, as for the constants below
+ROTATION_FLOOR_RAD = 1e-3  # σ added to every measured body rotation, for the same reasons
+REPORT_MAX_SIGMA_M = 0.05  # a cone whose offset σ exceeds this on any axis is reported as unknown (NaN): 3σ must fit
+# in the 150 mm concentricity tolerance for a number to be worth showing
+REPORT_WARMUP_S = 4.0  # for this long after the topside is placed, a cone is reported only when its σ is below
+REPORT_WARMUP_SIGMA_M = 0.025  # this: the first seconds' camera poses are poorly known and not Gaussian
+SMOOTHER_SPAN_S = 30.0  # recorded runs are smoothed this much at a time, each time with SMOOTHER_LAG_S of the
+SMOOTHER_LAG_S = 45.0  # future after it: memory holds both, not the whole run; a still camera gains from the far future
+CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame (edge-fit corners in fog and rain: 0.1 px median)
+VIEW = 8  # bias states per view (camera, marker): one per corner coordinate
+VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that stays while its marker's image stays
+VIEW_BIAS_RENEW_PX = 0.5  # that part renews as the marker's image moves: exp(-travel / this) of it stays from one
+# frame of the view to the next (travel: the mean shift of its predicted corners, the filter's own corrections included)
+VIEW_BIAS_TAU_S = 0.5  # ... but no faster than with this time constant, however far the image travels (a drone's
+# marker cells and the stream's coding move with the marker, not the pixel grid)
+CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual (rain's
+# heavy tail)
+CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a drone's jitter and a vessel's
+# wave motion turn within a second or two
+MOTION_LAG_S = 1.0  # lag of the second differences of jacket-marker image positions that measure a camera's motion
+MOTION_SAMPLES = 60  # second differences (per marker and image axis) whose median gives the camera's motion level
+MOTION_MIN_SAMPLES = 12  # until then the mount's motion prior is used as it stands
+MOTION_UPDATE_EVERY = 5  # frames with new samples between two medians (the level changes over seconds)
+MOTION_FLOOR = 1e-4  # the least share of its mount's process noise a camera keeps
+GAUSSIAN_MEDIAN_CHI2_1 = 0.4549  # median of a χ² variable with 1 degree of freedom: variance from a median of squares
+PLACEMENT_GAIN = 25.0  # σ × 5 on the pose that first places a camera: it only linearises; the same frame's corners,
+# applied right after, carry its information (else counted twice)
+CORNER_GATE_CHI2 = 26.12  # 8 degrees of freedom (a marker's four corners), 99.9 %
+TOPSIDE_PLACEMENT_M = 1.0  # σ of the topside's position when a single view first places it
+PLACEMENT_FIT_P = 0.99  # a view places a camera or the topside only if its pose fits its corners as well as
+# CORNER_NOISE_PX would at this probability (χ² of the RMS over 8 N - 6 degrees of freedom, N markers)
+SURVEY_GATE_CHI2 = GATE_CHI2[3]  # a camera's surveyed position (rig: position, position_sigma) is applied when its
+# first view places it, unless it lies beyond this from that placement: then reported (survey_conflicts), not trusted
+
+
+
+@dataclass(frozen=True)
+class CameraMotion:
+    """How a camera on one kind of mount may move: its pose's process noise and the prior of its rates."""
+
+    mount: str
+    angular_accel_psd: float  # rad²/s³, white-noise angular acceleration
+    accel_psd: float  # m²/s³, white-noise acceleration
+    prior_rate_radps: float
+    prior_speed_mps: float
+    adapts: bool = True  # its process noise follows the motion its images show (below); a hovering drone's
+    # jitter is fast at every scale (its 1 s level understates its frame-to-frame motion), so it keeps its prior
+
+
+@dataclass(frozen=True)
+class FilterTuning:
+    """Process and prior noise of the filter."""
+
+    accel_psd: float = 0.05  # m²/s³: white-noise acceleration of the translation (crane and waves)
+    angular_accel_psd: float = 1e-6  # rad²/s³: a topside hanging from cranes yaws and rolls slowly
+    prior_position_m: float = 20.0
+    prior_rotation_rad: float = 0.05
+    prior_speed_mps: float = 1.0
+    prior_rate_radps: float = 0.01
+    camera_motion: tuple[CameraMotion, ...] = (
+        CameraMotion("fixed", 1e-8, 1e-6, 1e-4, 1e-3),  # bolted to the jacket or a platform
+        CameraMotion("vessel", 1e-5, 0.1, 0.005, 0.3),  # on the crane vessel: metres and milliradians in waves
+        CameraMotion("drone", 1e-3, 0.5, 0.05, 1.0,  # flying: 0.3 m/s and 0.01 rad/s, changing within seconds
+                     adapts=False))
+
+    def motion(self, mount: str) -> CameraMotion:
+        """The motion prior of a camera mount."""
+        return next(m for m in self.camera_motion if m.mount == mount)
+
+
+
+def block_noise(dt: float, psds: list[float]) -> np.ndarray:
+    """(12, 12) white-noise-acceleration process noise of one body, psds (6,) per pose axis."""
+    Q = np.zeros((STATE, STATE))
+    for i, q in enumerate(psds):
+        Q[i, i] = q * dt**3 / 3
+        Q[i, i + 6] = Q[i + 6, i] = q * dt**2 / 2
+        Q[i + 6, i + 6] = q * dt
+    return Q
+
+
+def process_noise(dt: float, tuning: FilterTuning) -> np.ndarray:
+    """(12, 12) white-noise-acceleration process noise of the topside over dt seconds."""
+    return block_noise(dt, [tuning.accel_psd] * 3 + [tuning.angular_accel_psd] * 3)
+
+
+def camera_process_noise(dt: float, tuning: FilterTuning, mount: str, scale: float = 1.0) -> np.ndarray:
+    """(12, 12) process noise of one camera on a mount over dt seconds (rotation first, then position),
+    scaled by the share of the mount's motion the camera shows (1: all of it)."""
+    m = tuning.motion(mount)
+    return block_noise(dt, [scale * m.angular_accel_psd] * 3 + [scale * m.accel_psd] * 3)
+
+
+def prior_covariance(tuning: FilterTuning) -> np.ndarray:
+    """(12, 12) initial covariance of the topside: anywhere near, barely rotated."""
+    sd = [tuning.prior_position_m] * 3 + [tuning.prior_rotation_rad] * 3 + \
+         [tuning.prior_speed_mps] * 3 + [tuning.prior_rate_radps] * 3
+    return np.diag(np.square(sd))
+
+
+
+def fits_its_corners(pose: BodyPose) -> bool:
+    """Whether a pose's reprojection RMS is what corner noise of CORNER_NOISE_PX leaves at PLACEMENT_FIT_P
+    over the corners its fit kept (Wilson-Hilferty's χ² quantile, within 1 % from 2 degrees of freedom up)."""
+    points = 8 * len(pose.marker_ids) - 2 * pose.outliers  # coordinates of the corners the fit kept
+    dof = points - 6
+    z = NormalDist().inv_cdf(PLACEMENT_FIT_P)
+    quantile = dof * (1.0 - 2.0 / (9 * dof) + z * np.sqrt(2.0 / (9 * dof))) ** 3
+    return pose.reprojection_error**2 * points <= quantile * CORNER_NOISE_PX**2

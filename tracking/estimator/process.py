@@ -1,0 +1,134 @@
+"""The process model: how the state moves from one capture time to the next, and how much a camera moves.
+
+Per body (the topside, each camera) the state holds a pose error and its rates. Over dt the pose gains b × rate and
+the rate keeps a share a of itself: the topside keeps its speed (a = 1, b = dt), a camera's rates revert to zero
+within CAMERA_RATE_TAU_S. The states after the bodies (consider states, view biases) keep a share of themselves, the
+rest renewed with VIEW_BIAS_PX. A camera's process noise follows the motion its jacket markers' images show
+(CameraMotionLevel).
+"""
+
+from __future__ import annotations
+
+import bisect
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracking.estimator.noise import (
+    GAUSSIAN_MEDIAN_CHI2_1,
+    MOTION_LAG_S,
+    MOTION_MIN_SAMPLES,
+    MOTION_SAMPLES,
+    MOTION_UPDATE_EVERY,
+    STATE,
+    VIEW_BIAS_PX,
+)
+
+
+def rate_decay(dt: float, tau: float) -> tuple[float, float]:
+    """(a, b) of a rate that reverts to zero with time constant tau (inf: constant velocity) over dt:
+    rate' = a rate, pose' = pose + b rate."""
+    if not np.isfinite(tau):
+        return 1.0, dt
+    a = float(np.exp(-dt / tau))
+    return a, tau * (1.0 - a)
+
+
+def _body_rows(M: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """F M as a new array for M (n, k): F = [[I, B], [0, A]] per body on the first 12 B rows (rates' decay a (B, 6)
+    and their weight b (B, 6) on the pose), identity on the rest. O(n k), where a dense F would cost O(n² k)."""
+    out = np.array(M, order="C")
+    rows = out[:a.size * 2].reshape(len(a), 2, 6, -1)  # a view: rows of contiguous memory
+    rows[:, 0] += b[:, :, None] * rows[:, 1]
+    rows[:, 1] *= a[:, :, None]
+    return out
+
+
+def _body_columns(M: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
+    """M Fᵀ in place for a C-ordered M (k, n), F as in _body_rows."""
+    cols = M[:, :a.size * 2].reshape(len(M), len(a), 2, 6)  # a view: each row's first 12 B entries are contiguous
+    cols[:, :, 0] += cols[:, :, 1] * b[None]
+    cols[:, :, 1] *= a[None]
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One prediction of the state (n,): bodies first (12 each), then consider states and view biases.
+
+    Per body, its rates' decay a (B, 6), their weight b (B, 6) on the pose and its process noise (B, 12, 12); per
+    state after the bodies, the share of it that stays (V,), the rest renewed with VIEW_BIAS_PX (consider states:
+    all of it stays).
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    noise: np.ndarray
+    keep: np.ndarray
+
+    def apply(self, M: np.ndarray) -> np.ndarray:
+        """F M for M (n, k)."""
+        out = _body_rows(M, self.a, self.b)
+        out[self.a.size * 2:] *= self.keep[:, None]
+        return out
+
+    def covariance(self, P: np.ndarray) -> np.ndarray:
+        """F P Fᵀ + Q for a covariance P (n, n)."""
+        out = self.apply(P)
+        _body_columns(out, self.a, self.b)
+        out[:, self.a.size * 2:] *= self.keep[None, :]
+        for k, Q in enumerate(self.noise):
+            out[STATE * k:STATE * (k + 1), STATE * k:STATE * (k + 1)] += Q
+        nb = self.a.size * 2
+        out[nb:, nb:] += np.diag((1.0 - self.keep**2) * VIEW_BIAS_PX**2)
+        return out
+
+
+@dataclass
+class CameraMotionLevel:
+    """How much a camera moves, from the image motion of the jacket markers it sees (fixed in the world).
+
+    Each frame gives, per jacket marker and image axis, the second divided difference a of the marker
+    centre over MOTION_LAG_S (three samples about that far apart). Under white-noise angular acceleration
+    of psd q, Var(a) = (2/3) q f² / Δ px²/s⁴, so each a² (3/2) Δ / f² estimates q; the median of the last
+    MOTION_SAMPLES (robust to rain-struck corners) over the χ²₁ median gives the camera's level. Corner
+    noise alone reads as about 1e-8 rad²/s³: a still camera's level, below every mount's prior.
+    """
+
+    tracks: dict[int, tuple[list[float], list[tuple[float, float]]]] = field(default_factory=dict)  # jacket
+    # marker id -> times and centres (px) of its last 2.5 lags
+    samples: deque = field(default_factory=lambda: deque(maxlen=MOTION_SAMPLES))  # q estimates, rad²/s³
+    level: float | None = None  # angular acceleration psd the camera shows, rad²/s³ (None until enough samples)
+    pending: int = 0  # frames with new samples since the level was last taken
+
+    def add(self, time: float, corners: dict[int, np.ndarray], focal_px: float) -> None:
+        """One frame's jacket-marker corners (4, 2), undistorted pixels."""
+        added = False
+        for marker, z in corners.items():
+            times, centres = self.tracks.setdefault(marker, ([], []))
+            cx, cy = z.reshape(4, 2).sum(axis=0).tolist()
+            times.append(time)
+            centres.append((cx / 4, cy / 4))
+            old = bisect.bisect_left(times, time - 2.5 * MOTION_LAG_S)
+            if old:
+                del times[:old], centres[:old]
+            if times[0] > time - 1.75 * MOTION_LAG_S:
+                continue  # not yet two lags of history
+            i1, i0 = (self._nearest(times, time - k * MOTION_LAG_S) for k in (1, 2))
+            t0, t1 = times[i0], times[i1]
+            if not (t0 < t1 < time) or abs(t1 - (time - MOTION_LAG_S)) > 0.25 * MOTION_LAG_S:
+                continue
+            weight = 3.0 / ((time - t0) * focal_px**2)  # a² (3/2) Δ / f², a = 2 Δv / (2 Δ)
+            for k in range(2):
+                c0, c1, c2 = centres[i0][k], centres[i1][k], centres[-1][k]
+                self.samples.append(weight * ((c2 - c1) / (time - t1) - (c1 - c0) / (t1 - t0)) ** 2)
+            added = True
+        self.pending += added
+        if self.pending >= MOTION_UPDATE_EVERY and len(self.samples) >= MOTION_MIN_SAMPLES:
+            self.level = float(np.median(self.samples)) / GAUSSIAN_MEDIAN_CHI2_1
+            self.pending = 0
+
+    @staticmethod
+    def _nearest(times: list[float], t: float) -> int:
+        k = bisect.bisect_left(times, t)
+        return k if k == 0 or (k < len(times) and times[k] - t < t - times[k - 1]) else k - 1

@@ -1,0 +1,238 @@
+"""The filter's state: what each entry of x (n,) and P (n, n) is, and the operations every stage of the filter shares.
+
+x holds, in order: the topside (12: translation t and small rotation ω of the topside frame in the jacket frame, then
+their rates); every camera of the rig (12 each: its pose error (δθ, δp) about a nominal T_jacket_camera, jacket frame,
+then its rates); the markers' survey errors as consider states (ConsiderStates); then the views' corner biases (8 per
+(camera, marker), appended as views first appear). A camera's nominal pose absorbs its error at every prediction
+(FilterState.fold_cameras), so within a step every error is about the predicted nominal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracking.estimator.hypotheses import Hypotheses
+from tracking.estimator.noise import STATE, VIEW, VIEW_BIAS_PX, FilterTuning, prior_covariance
+from tracking.estimator.process import CameraMotionLevel
+from tracking.geometry import rotation, skew
+from tracking.offsets import body_geometry
+from tracking.pose import body_object_points
+from tracking.rig import Rig
+from tracking.scale import ScaleEvidence
+
+
+def point_offset_matrix(r: np.ndarray) -> np.ndarray:
+    """(3, 12) H: offset of a topside point at r (3,) from the topside state, o = t - [r]× ω."""
+    H = np.zeros((3, STATE))
+    H[:, :3] = np.eye(3)
+    H[:, 3:6] = -skew(r)
+    return H
+
+
+@dataclass
+class ViewBias:
+    """The persistent corner errors of one marker seen by one camera: where their 8 states sit, and the marker's corners
+    (8,) predicted at its last frame (ideal pixels), from which the next frame's image travel is measured."""
+
+    index: int
+    corners: np.ndarray
+    time: float
+
+
+@dataclass
+class CameraState:
+    """The nominal pose of one camera in the jacket frame, about which the filter holds its error."""
+
+    index: int  # first index of the camera's block in the state
+    mount: str  # the rig's camera mount: its motion prior
+    name: str  # the rig's camera name: its views' key
+    T_jacket_camera: np.ndarray | None = None  # (4, 4), None until a jacket view places the camera
+    consecutive_rejects: int = 0
+    motion: CameraMotionLevel = field(default_factory=lambda: CameraMotionLevel())
+    motion_scale: float = 1.0  # share of its mount's process noise the camera gets (1 until its level is known)
+    hypotheses: Hypotheses | None = None  # while an ambiguous jacket view waits: its options and their evidence
+    waiting: str = "no frame of it yet"  # why it is not placed (empty once placed)
+    placed_at: float | None = None  # capture time of its (last) placement, s
+
+
+
+def cone_points(rig: Rig) -> dict[str, np.ndarray]:
+    """The point (3,) whose offset is each cone's: its tip in the rig, else the centre of its pair's topside marker
+    (topside frame, which is the jacket frame when mated)."""
+    points = {c: np.array(p, dtype=float) for c, p in rig.cones.items()}
+    markers = rig.marker_by_id
+    for pair in rig.all_pairs():
+        if pair.cone not in points:
+            points[pair.cone] = np.array(markers[pair.topside].center, dtype=float)
+    return points
+
+
+@dataclass(frozen=True)
+class ConsiderStates:
+    """The markers' survey errors, which the rig states (survey_sigma) but footage is not trusted to measure, carried
+    as consider (Schmidt) states: each marker's rotation δθ and centre δp in its body's frame. They sit in the state
+    after the bodies with their prior covariance, which no update changes, and stay zero; the updates carry their
+    cross-covariances, so a cone's σ holds them as the geometry passes them on (a survey error stays while the markers
+    stay: averaging frames does not shrink it)."""
+
+    markers: dict[int, int]  # marker id -> index of its (δθ, δp) (6,)
+    prior: np.ndarray  # (C,) variances, in index order from the first
+    first: int  # index of the first
+
+    @classmethod
+    def of(cls, rig: Rig, first: int) -> ConsiderStates:
+        """The rig's survey σ of its markers that are not references, from index first."""
+        markers, prior = {}, []
+        for marker in rig.markers:
+            sigma = rig.marker_sigma(marker)
+            if sigma is not None and (sigma.tilt_rad().any() or sigma.position().any()):
+                markers[marker.id] = first + len(prior)
+                prior.extend(np.concatenate([sigma.tilt_rad(), sigma.position()]) ** 2)
+        return cls(markers, np.array(prior), first)
+
+    @property
+    def indices(self) -> slice:
+        return slice(self.first, self.first + self.prior.size)
+
+
+
+def camera_pose(nominal: np.ndarray, index: int, x: np.ndarray) -> np.ndarray:
+    """(4, 4) T_jacket_camera of a camera at nominal T_jacket_camera (4, 4) whose error states start at index in x."""
+    T = np.eye(4)
+    T[:3, :3] = rotation(x[index:index + 3]) @ nominal[:3, :3]
+    T[:3, 3] = nominal[:3, 3] + x[index + 3:index + 6]
+    return T
+
+
+def topside_pose(x: np.ndarray) -> np.ndarray:
+    """(4, 4) T_jacket_topside of a state."""
+    T = np.eye(4)
+    T[:3, :3] = rotation(x[3:6])
+    T[:3, 3] = x[:3]
+    return T
+
+
+@dataclass
+class FilterState:
+    """The state and covariance of one installation's filter, the rig's geometry they refer to, and what the filter
+    keeps between frames (counters, placements, findings)."""
+
+    rig: Rig
+    tuning: FilterTuning = field(default_factory=FilterTuning)
+    x: np.ndarray = field(init=False)  # (n,)
+    P: np.ndarray = field(init=False)  # (n, n)
+    time: float | None = field(default=None, init=False)  # capture time of the state, s (None before the first)
+    cameras: dict[str, CameraState] = field(init=False)  # rig order
+    body_size: int = field(init=False)  # entries of the bodies: the topside's and the cameras'
+    consider: ConsiderStates = field(init=False)  # after the bodies; view biases after them
+    views: dict[tuple[str, int], ViewBias] = field(init=False)  # (camera, marker) -> its bias states
+    topside_placed: bool = field(default=False, init=False)
+    placed_at: float | None = field(default=None, init=False)  # capture time the topside was (last) placed, or
+    # first measured
+    rejected: int = field(default=0, init=False)  # total gated measurements
+    consecutive_rejects: int = field(default=0, init=False)  # of the topside
+    last_accepted: dict[str, float] = field(init=False)  # camera -> capture time of its last topside view used
+    survey_conflicts: dict[str, float] = field(init=False)  # camera -> distance, m, between its surveyed position
+    # and where its first view placed it, for a survey beyond SURVEY_GATE_CHI2 (not applied)
+    scale: ScaleEvidence = field(init=False)  # whether the markers look the size the rig states (tracking.scale)
+    below: tuple[int, float] = field(default=(0, 0.0), init=False)  # estimates withheld for putting the topside
+    # through its cones, and the deepest of their Δz (m)
+    jacket_corners: dict[int, np.ndarray] = field(init=False)  # marker id -> its corners (4, 3), jacket frame
+    topside_corners: dict[int, np.ndarray] = field(init=False)  # marker id -> its corners (4, 3), topside frame
+    centres: dict[int, np.ndarray] = field(init=False)  # marker id -> its centre (3,), its body's frame
+    cones: dict[str, np.ndarray] = field(init=False)  # cone -> the point (3,) whose offset is the cone's
+    clock_sigma: dict[str, float] = field(init=False)  # camera -> its clock's σ, s (rig: time_offset_sigma)
+    surveys: dict[str, tuple[np.ndarray, float]] = field(init=False)  # camera -> surveyed position (3,), σ m
+
+    def __post_init__(self) -> None:
+        self.cameras = {c.name: CameraState(STATE * (1 + k), c.mount, c.name) for k, c in enumerate(self.rig.cameras)}
+        self.body_size = STATE * (1 + len(self.cameras))
+        self.consider = ConsiderStates.of(self.rig, self.body_size)
+        self.views = {}
+        n = self.consider.indices.stop
+        self.x = np.zeros(n)
+        self.P = np.zeros((n, n))
+        self.P[:STATE, :STATE] = prior_covariance(self.tuning)
+        self.P[self.consider.indices, self.consider.indices] = np.diag(self.consider.prior)
+        for cam in self.cameras.values():
+            self.reset_camera(cam)
+        self.last_accepted, self.survey_conflicts, self.scale = {}, {}, ScaleEvidence()
+        geometry = body_geometry(self.rig)
+        self.jacket_corners = {i: body_object_points([T], self.rig.marker_size) for i, T in geometry.jacket.items()}
+        self.topside_corners = {i: body_object_points([T], self.rig.marker_size)
+                                for i, T in geometry.topside.items()}
+        self.centres = {m.id: np.array(m.center, dtype=float) for m in self.rig.markers}
+        self.cones = cone_points(self.rig)
+        self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}
+        self.surveys = {c.name: (np.array(c.position, dtype=float), float(c.position_sigma)) for c in self.rig.cameras
+                        if c.position is not None and c.position_sigma is not None}
+
+    @property
+    def size(self) -> int:
+        """Length of the state: the bodies', the consider states' and the views' biases so far."""
+        return self.x.size
+
+    def camera_pose(self, cam: CameraState, x: np.ndarray | None = None) -> np.ndarray:
+        """(4, 4) T_jacket_camera of a placed camera in a state (default: the current one)."""
+        assert cam.T_jacket_camera is not None, f"camera {cam.name} is not placed"
+        return camera_pose(cam.T_jacket_camera, cam.index, self.x if x is None else x)
+
+    def reset_camera(self, cam: CameraState, covariance: np.ndarray | None = None) -> None:
+        """Forget a camera: its block decoupled, its pose covariance given (or unit), its rates' prior."""
+        b = slice(cam.index, cam.index + STATE)
+        self.P[b, :] = 0.0
+        self.P[:, b] = 0.0
+        motion = self.tuning.motion(cam.mount)
+        sd = [1.0] * 6 + [motion.prior_rate_radps] * 3 + [motion.prior_speed_mps] * 3
+        self.P[b, b] = np.diag(np.square(sd))
+        if covariance is not None:
+            self.P[cam.index:cam.index + 6, cam.index:cam.index + 6] = covariance
+        self.x[b] = 0.0
+        cam.consecutive_rejects = 0
+        for (name, _), view in self.views.items():  # its views' biases: unknown again, and about nothing
+            if name == cam.name:
+                self.forget_view(view)
+
+    def forget_view(self, view: ViewBias) -> None:
+        """A view's bias states back to their prior, decoupled from the rest."""
+        v = slice(view.index, view.index + VIEW)
+        self.P[v, :] = 0.0
+        self.P[:, v] = 0.0
+        self.P[v, v] = VIEW_BIAS_PX**2 * np.eye(VIEW)
+        self.x[v] = 0.0
+
+    def append_view(self, key: tuple[str, int], corners: np.ndarray, time: float) -> ViewBias:
+        """A new view's bias states appended to the state with their prior; its marker's corners (8,) predicted now."""
+        n = self.size
+        self.x = np.concatenate([self.x, np.zeros(VIEW)])
+        P = np.zeros((n + VIEW, n + VIEW))
+        P[:n, :n] = self.P
+        P[n:, n:] = VIEW_BIAS_PX**2 * np.eye(VIEW)
+        self.P = P
+        self.views[key] = ViewBias(n, corners, time)
+        return self.views[key]
+
+    def fold_cameras(self) -> None:
+        """Move the cameras' pose errors (and the motion their rates imply) into their nominal poses.
+
+        Done once per step, at the prediction: within a step every error is about the predicted nominal,
+        which keeps the smoother's differences between steps consistent.
+        """
+        for cam in self.cameras.values():
+            if cam.T_jacket_camera is not None:
+                cam.T_jacket_camera = self.camera_pose(cam)
+                self.x[cam.index:cam.index + 6] = 0.0
+
+    def apply(self, H: np.ndarray, y: np.ndarray, R: np.ndarray) -> None:
+        """Kalman update with H (M, n), innovation y (M,) and measurement covariance R (M, M)."""
+        PHt = self.P @ H.T  # (n, M): O(n² M), where the Joseph form would cost O(n³) for n = 12 per body
+        S = H @ PHt + R
+        K = np.linalg.solve(S, PHt.T).T
+        P = self.P - K @ PHt.T
+        c = self.consider.indices  # consider states are not estimated (Schmidt): the others' update, their covariance
+        K[c] = 0.0  # and cross-covariance are as with them, their own is kept
+        P[c, c] = self.P[c, c]
+        self.x = self.x + K @ y
+        self.P = (P + P.T) / 2  # stays symmetric
