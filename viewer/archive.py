@@ -57,6 +57,7 @@ from mcap_protobuf.schema import build_file_descriptor_set
 from tracking.camera import CameraModel
 from tracking.estimator import cone_points
 from tracking.filtering import ConeEstimate
+from tracking.geometry import quaternions_xyzw
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig
 from viewer.manifest import (
@@ -79,7 +80,6 @@ from viewer.recording import (
     cone_state,
     encode_jpeg,
     marker_axes_px,
-    quaternions_xyzw,
     topside_pose,
 )
 

@@ -22,6 +22,7 @@ import pandas as pd
 import rerun as rr
 
 from tracking.filtering import ConeEstimate
+from tracking.geometry import quaternions_xyzw
 from tracking.rig import (
     DEFAULT_CONE_HEIGHT_M,
     DEFAULT_LEG_DIAMETER_M,
@@ -30,7 +31,7 @@ from tracking.rig import (
     PLATE_STANDOFF_M,
     Rig,
 )
-from viewer.recording import AXES, TOLERANCE_M, concentricity, quaternions_xyzw, time_column, topside_pose
+from viewer.recording import AXES, TOLERANCE_M, concentricity, time_column, topside_pose
 
 JACKET_STEEL = (230, 170, 40)  # the jacket's yellow paint
 CONE_STEEL = (190, 80, 40)

@@ -27,6 +27,7 @@ import rerun as rr
 from tracking.camera import CameraModel
 from tracking.estimator import point_offset_matrix
 from tracking.filtering import ConeEstimate
+from tracking.geometry import quaternions_xyzw, rotation, transform
 from tracking.images import Frame, VideoHealth
 from tracking.pipeline import FrameResult
 from tracking.pose import Choice, MarkerPose
@@ -105,22 +106,13 @@ def log_camera_poses(rec: rr.RecordingStream, path: str, times: np.ndarray, T_ja
                         recording=rec)
 
 
-def pose_to_T(pose: np.ndarray) -> np.ndarray:
-    """(4, 4) transform from a truth log's pose vector (6,): x, y, z (m), rx, ry, rz (rotation vector, rad).
-
-    Written here, not taken from the simulator: viewer reads truth logs but never imports tracking.sim."""
-    T = np.eye(4)
-    T[:3, :3] = cv2.Rodrigues(np.asarray(pose[3:6], dtype=np.float64).reshape(3, 1))[0]
-    T[:3, 3] = pose[:3]
-    return T
-
-
 def true_camera_poses(truth: pd.DataFrame, name: str) -> np.ndarray | None:
     """(N, 4, 4) T_jacket_camera of a camera at the truth log's times, or None when the log has no pose for it."""
     columns = [f"camera_{name}_{axis}" for axis in TRUTH_POSE_AXES]
     if not set(columns) <= set(truth.columns):
         return None
-    return np.array([pose_to_T(pose) for pose in truth[columns].to_numpy(dtype=float)]).reshape(-1, 4, 4)
+    poses = truth[columns].to_numpy(dtype=float)
+    return np.array([transform(rotation(pose[3:6]), pose[:3]) for pose in poses]).reshape(-1, 4, 4)
 
 
 def log_true_cameras(rec: rr.RecordingStream, truth: pd.DataFrame, cameras: dict[str, CameraModel]) -> None:
@@ -240,14 +232,6 @@ def log_video_health(rec: rr.RecordingStream, camera: str, video: VideoHealth) -
     if video.news:
         rr.log(f"health/{camera}/video/events", rr.TextLog(f"{video.source}: {'; '.join(video.news)}",
                                                           level=rr.TextLogLevel.WARN), recording=rec)
-
-
-def quaternions_xyzw(rotations: np.ndarray) -> np.ndarray:
-    """Unit quaternions (N, 4), x y z w, of rotation matrices (N, 3, 3) (through OpenCV's Rodrigues)."""
-    rvecs = np.array([cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0].reshape(3) for R in rotations]).reshape(-1, 3)
-    angles = np.linalg.norm(rvecs, axis=1)
-    axes = np.divide(rvecs, angles[:, None], out=np.zeros_like(rvecs), where=angles[:, None] > 0)
-    return np.column_stack([axes * np.sin(angles / 2)[:, None], np.cos(angles / 2)])
 
 
 def log_marker_frames(rec: rr.RecordingStream, path: str, size: float, T_jacket_marker: dict[int, np.ndarray],

@@ -52,15 +52,16 @@ if TYPE_CHECKING:
     from rich.progress import Progress, TaskID
 
     from tracking.batch import Installation, Outcome
+    from tracking.estimator import FilterReport, Measurement
     from tracking.evaluate import Evaluation
     from tracking.filtering import ConeEstimate
-    from tracking.estimator import FilterReport, Measurement
     from tracking.parallel import Runner, VideoPlan
     from tracking.pipeline import FrameResult, TrackStats
     from tracking.report import OffsetsWriter
     from tracking.rig import Rig
 
-Estimator = Callable[..., Iterable["ConeEstimate"]]  # tracking.estimator.ESTIMATORS' values: (rig, measurements, report)
+# tracking.estimator.ESTIMATORS' values: (rig, measurements, report)
+Estimator = Callable[..., Iterable["ConeEstimate"]]
 
 DEMO_SCENARIO = "config2-procedure5-weather"
 DEMO_DURATION_S = 20.0
@@ -178,8 +179,8 @@ def track(
 
     Each camera's video is cut into chunks at keyframes, tracked in worker processes (--workers) or Ray tasks
     (--ray) and fused here in capture-time order: the output is the same whatever runs the chunks."""
-    from tracking.evaluate import read_truth
     from tracking.estimator import ESTIMATORS, FilterReport
+    from tracking.evaluate import read_truth
     from tracking.parallel import plan_rig, runner
     from tracking.pipeline import TrackStats
     from tracking.rig import load_rig
@@ -355,8 +356,8 @@ def _batch_one(one: Prepared, run: Runner, refine: Refinement, progress: Progres
 def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome) -> None:
     """One installation's offsets.csv (and run.rrd), then, with a truth, its accuracy.md and errors in outcome."""
     from tracking.batch import ACCURACY_NAME, OFFSETS_NAME, RRD_NAME
-    from tracking.evaluate import evaluate_runs, evaluation_markdown, read_offsets, read_truth
     from tracking.estimator import ESTIMATORS
+    from tracking.evaluate import evaluate_runs, evaluation_markdown, read_offsets, read_truth
     from tracking.outputs import write_text
 
     csv, rrd = inst.out / OFFSETS_NAME, (inst.out / RRD_NAME) if inst.rrd else None
