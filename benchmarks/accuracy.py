@@ -32,9 +32,9 @@ import numpy as np
 import pandas as pd
 
 from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetection, Refinement
+from tracking.estimate import ConeEstimate
 from tracking.estimator import ESTIMATORS
 from tracking.evaluate import Evaluation, errors, evaluate_runs, truth_at
-from tracking.filtering import ConeEstimate
 from tracking.images import Frame
 from tracking.pipeline import CameraTracker, track_rig
 from tracking.rig import Rig, load_rig

@@ -23,8 +23,8 @@ from tracking.estimator import ESTIMATORS
 from tracking.pipeline import FrameResult, track_rig
 from tracking.rig import load_rig
 from viewer.archive import ArchiveSink
-from viewer.audit import recover, verify
-from viewer.manifest import MANIFEST_NAME
+from viewer.archive.audit import recover, verify
+from viewer.archive.manifest import MANIFEST_NAME
 
 REPO = Path(__file__).resolve().parents[1]
 CACHE = REPO / "benchmarks" / ".cache" / "archive-scene"
@@ -60,7 +60,7 @@ def main() -> None:
         if len(results) >= MAX_FRAMES:
             break
     estimates = list(ESTIMATORS["fused"](rig, (m for r in results  # as `topside track` feeds it
-                                               for m in [*r.offsets, *([r.observation] if r.observation else [])])))
+                                               for m in r.measurements)))
     events = sorted([(r.time, 0, i) for i, r in enumerate(results)] + [(e.time, 1, i) for i, e in enumerate(estimates)])
     span = {}
     for r in results:

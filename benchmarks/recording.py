@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.report import write_results
-from tracking.filtering import paper_filter
+from tracking.paper import paper_filter
 from tracking.pipeline import FrameResult, track_rig
 from tracking.rig import load_rig
 from viewer.session import Recorder

@@ -33,6 +33,7 @@ from benchmarks.scenes import render_scene
 from tracking.detection import DEFAULT_REFINEMENT
 from tracking.estimator import ESTIMATORS
 from tracking.images import frames
+from tracking.offsets_csv import write_offsets_csv
 from tracking.parallel import (
     CHUNK_FRAMES,
     ChunkTask,
@@ -45,7 +46,6 @@ from tracking.parallel import (
     track_chunks,
 )
 from tracking.pipeline import CameraTracker, TrackStats, track_rig
-from tracking.report import write_offsets_csv
 from tracking.rig import load_rig
 
 SCENARIO = "config2-procedure5-weather"
@@ -252,7 +252,7 @@ def fusion_cost(rig_path: Path) -> float:
     """CPU ms per frame of the fused filter alone on this process (measurements made beforehand)."""
     rig = load_rig(rig_path)
     results = list(track_chunks(rig, InPlace()))
-    measurements = [m for r in results for m in (*r.offsets, *([r.observation] if r.observation else []))]
+    measurements = [m for r in results for m in r.measurements]
     t = time.process_time()
     for _ in ESTIMATORS["fused"](rig, iter(measurements)):
         pass

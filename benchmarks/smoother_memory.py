@@ -2,7 +2,7 @@
 
 The simulated set-down (fog, rain, 15 FPS, 920×600, four cameras; the accuracy benchmark's render and detections)
 is replayed in a loop, capture times running on, for some minutes of capture time, and smoothed
-(`tracking.fusion.smoothed_estimates`) once with its pieces (SMOOTHER_SPAN_S + SMOOTHER_LAG_S) and once over the
+(`tracking.estimator.smoothed_estimates`) once with its pieces (SMOOTHER_SPAN_S + SMOOTHER_LAG_S) and once over the
 whole run (span unbounded), each in a process of its own: peak resident memory (RSS) and CPU time. The topside jumps
 back at every seam of the loop; the filter takes that as a new placement, as it would a lost and found topside.
 `--cameras 8` adds a second camera beside each of the four (the same detections, half a frame later, under another

@@ -128,8 +128,7 @@ def stage_costs(scene: Path) -> dict[str, float]:
     results.sort(key=lambda r: r.time)
     kf = TopsideFilter(rig, FilterTuning())
     t = time.process_time()
-    estimates = [filter_frame(kf, [*r.offsets, *([r.observation] if r.observation is not None else [])])
-                 if r.offsets or r.observation is not None else [] for r in results]
+    estimates = [filter_frame(kf, r.measurements) if r.measurements else [] for r in results]
     cpu["fusion"] = time.process_time() - t
     with tempfile.TemporaryDirectory() as tmp:
         recorder = Recorder(rig, Path(tmp) / "stages.rrd", estimate_period_s=LIVE_ESTIMATE_PERIOD_S)

@@ -31,6 +31,8 @@ benchmarks/corners.py.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
@@ -133,6 +135,59 @@ def _intersect(p: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p0 + t[..., None] * u0, np.abs(cross)
 
 
+@dataclass(frozen=True)
+class _Edges:
+    """The four edges of quads (B, 4, 2) as lines to sample across: edge k runs from corner k to corner k+1."""
+
+    start: np.ndarray  # (B, 4, 2) its first corner
+    u: np.ndarray  # (B, 4, 2) unit direction along it
+    normal: np.ndarray  # (B, 4, 2) unit normal, outward from the quad
+    length: np.ndarray  # (B, 4) px
+    sin_c: np.ndarray  # (B, 4) sine of the interior angle at corner k (floored at MIN_SIN_ANGLE)
+    cos_c: np.ndarray  # (B, 4) its cosine, floored at 0
+    cell_across: np.ndarray  # (B, 4) a code cell's thickness across the edge, px
+    usable: np.ndarray  # (B, 4) long enough and not too acute to fit
+
+    @classmethod
+    def of(cls, ideal: np.ndarray, cells: int) -> _Edges:
+        start, end = ideal, np.roll(ideal, -1, axis=1)
+        along = end - start
+        length = np.linalg.norm(along, axis=2)
+        usable = length > 2 * END_MARGIN_MIN_PX + MIN_PROFILES * SAMPLE_SPACING_PX
+        u = along / np.maximum(length, 1e-9)[..., None]
+        normal = np.stack([u[..., 1], -u[..., 0]], axis=2)
+        outward = np.sign(np.einsum("bij,bij->bi", (start + end) / 2 - ideal.mean(axis=1, keepdims=True), normal))
+        normal *= np.where(outward == 0, 1.0, outward)[..., None]
+        # interior angle at corner k, between edge k (leaving it) and edge k-1 (arriving)
+        back = -np.roll(u, 1, axis=1)
+        sin_c = np.abs(u[..., 0] * back[..., 1] - u[..., 1] * back[..., 0])
+        cos_c = np.maximum(np.einsum("bij,bij->bi", u, back), 0.0)
+        usable &= (sin_c > MIN_SIN_ANGLE) & (np.roll(sin_c, -1, axis=1) > MIN_SIN_ANGLE)
+        sin_c = np.maximum(sin_c, MIN_SIN_ANGLE)
+        # cell thickness across edge k: the neighbouring edges' lengths times their sine with edge k
+        cell_across = (np.roll(length, 1, axis=1) * sin_c + np.roll(length * sin_c, -1, axis=1)) / (2 * cells)
+        return cls(start, u, normal, length, sin_c, cos_c, cell_across, usable)
+
+    def along(self, reach: np.ndarray, cells: int) -> tuple[np.ndarray, np.ndarray]:
+        """Where profiles reaching reach (B, 4) px across sample each edge (B, 4, N), clear of the neighbouring edges
+        (wider margins at acute corners), and which edges keep enough of them (B, 4)."""
+        wedge = reach * (1 + self.cos_c) / self.sin_c
+        floor = np.maximum(END_MARGIN * self.length / cells, END_MARGIN_MIN_PX)
+        m_start = np.maximum(floor, wedge)
+        m_end = np.maximum(floor, np.roll(wedge, -1, axis=1))
+        span = self.length - m_start - m_end
+        usable = self.usable & (span > MIN_PROFILES * SAMPLE_SPACING_PX / 2)
+        span = np.maximum(span, 0.0)
+        n_prof = int(np.clip(np.max(span) / SAMPLE_SPACING_PX, MIN_PROFILES, MAX_PROFILES))
+        return m_start[..., None] + span[..., None] * ((np.arange(n_prof) + 0.5) / n_prof), usable
+
+    def lines(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lines (point, unit direction) (B, 4, 2) each of offset a and slope b (B, 4) from its edge."""
+        direction = self.u + b[..., None] * self.normal
+        direction /= np.maximum(np.linalg.norm(direction, axis=2, keepdims=True), 1e-12)
+        return self.start + a[..., None] * self.normal, direction
+
+
 def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, cells: int,
                coarse: bool, blur_model: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One pass over quads (B, 4, 2): robust lines (point, unit direction) through their edges, and which fitted.
@@ -140,54 +195,30 @@ def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, 
     The coarse pass puts each edge at the strongest dark-to-bright step within most of a cell either
     side (robust to a start a pixel off); the fine passes use the unbiased area edge.
     """
-    start, end = ideal, np.roll(ideal, -1, axis=1)
-    along = end - start
-    length = np.linalg.norm(along, axis=2)  # (B, 4)
-    usable = length > 2 * END_MARGIN_MIN_PX + MIN_PROFILES * SAMPLE_SPACING_PX
-    u = along / np.maximum(length, 1e-9)[..., None]
-    normal = np.stack([u[..., 1], -u[..., 0]], axis=2)
-    outward = np.sign(np.einsum("bij,bij->bi", (start + end) / 2 - ideal.mean(axis=1, keepdims=True), normal))
-    normal *= np.where(outward == 0, 1.0, outward)[..., None]
-    # interior angle at corner k, between edge k (leaving it) and edge k-1 (arriving)
-    back = -np.roll(u, 1, axis=1)
-    sin_c = np.abs(u[..., 0] * back[..., 1] - u[..., 1] * back[..., 0])
-    cos_c = np.maximum(np.einsum("bij,bij->bi", u, back), 0.0)
-    usable &= (sin_c > MIN_SIN_ANGLE) & (np.roll(sin_c, -1, axis=1) > MIN_SIN_ANGLE)
-    sin_c = np.maximum(sin_c, MIN_SIN_ANGLE)
-    # cell thickness across edge k: the neighbouring edges' lengths times their sine with edge k
-    cell_across = (np.roll(length, 1, axis=1) * sin_c + np.roll(length * sin_c, -1, axis=1)) / (2 * cells)
+    g = _Edges.of(ideal, cells)
     if coarse:
-        half = np.clip(COARSE_REACH * cell_across, HALF_WINDOW_MIN_PX, COARSE_MAX_PX)
+        half = np.clip(COARSE_REACH * g.cell_across, HALF_WINDOW_MIN_PX, COARSE_MAX_PX)
         level = half
     else:
-        half = np.clip(HALF_WINDOW * cell_across, HALF_WINDOW_MIN_PX, HALF_WINDOW_MAX_PX)
-        level = np.minimum(LEVEL_AT * cell_across, LEVEL_MAX_PX)
-    reach, modelled = level, None
+        half = np.clip(HALF_WINDOW * g.cell_across, HALF_WINDOW_MIN_PX, HALF_WINDOW_MAX_PX)
+        level = np.minimum(LEVEL_AT * g.cell_across, LEVEL_MAX_PX)
+    reach, modelled, model_reach = level, None, level
     if blur_model and not coarse:  # the edges the blurred-profile model takes, and its profiles' reach
-        model_reach = np.clip(BLUR_MODEL_CELLS * cell_across, HALF_WINDOW_MIN_PX, BLUR_MODEL_MAX_PX)
-        modelled = (cell_across < BLUR_MODEL_MAX_CELL_PX) \
-            & (cell_across.min(axis=1, keepdims=True) >= BLUR_MODEL_MIN_CELL_PX)  # (B, 4)
+        model_reach = np.clip(BLUR_MODEL_CELLS * g.cell_across, HALF_WINDOW_MIN_PX, BLUR_MODEL_MAX_PX)
+        modelled = (g.cell_across < BLUR_MODEL_MAX_CELL_PX) \
+            & (g.cell_across.min(axis=1, keepdims=True) >= BLUR_MODEL_MIN_CELL_PX)  # (B, 4)
         reach = np.where(modelled, np.maximum(level, model_reach), level)
-    # keep the profiles clear of the neighbouring edges: wider margins at acute corners
-    wedge = reach * (1 + cos_c) / sin_c
-    floor = np.maximum(END_MARGIN * length / cells, END_MARGIN_MIN_PX)
-    m_start = np.maximum(floor, wedge)
-    m_end = np.maximum(floor, np.roll(wedge, -1, axis=1))
-    span = length - m_start - m_end
-    usable &= span > MIN_PROFILES * SAMPLE_SPACING_PX / 2
-    span = np.maximum(span, 0.0)
-    n_prof = int(np.clip(np.max(span) / SAMPLE_SPACING_PX, MIN_PROFILES, MAX_PROFILES))
-    s = m_start[..., None] + span[..., None] * ((np.arange(n_prof) + 0.5) / n_prof)  # (B, 4, N) along the edge
+    s, usable = g.along(reach, cells)
     n_off = int(np.ceil(np.max(half) / PROFILE_STEP_PX))
     step = half / n_off  # (B, 4) sample spacing across each edge
     d = half[..., None] * (np.arange(-n_off, n_off + 1) / n_off)  # (B, 4, M)
-    beyond = (NEXT_CELL_AT * cell_across)[..., None]  # (B, 4, 1): the next cells in and out (code cell, quiet zone)
+    beyond = (NEXT_CELL_AT * g.cell_across)[..., None]  # (B, 4, 1): the next cells in and out (code cell, quiet zone)
     offsets = d if coarse else np.concatenate([-beyond, -level[..., None], d, level[..., None], beyond], axis=2)
 
     def profiles(rows: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Samples (R, 4, N, M) at offsets (R, 4, M) across the edges of quads rows, and where all are inside."""
-        pts = (start[rows, :, None, None, :] + s[rows, ..., None, None] * u[rows, :, None, None, :]
-               + offsets[:, :, None, :, None] * normal[rows, :, None, None, :])
+        pts = (g.start[rows, :, None, None, :] + s[rows, ..., None, None] * g.u[rows, :, None, None, :]
+               + offsets[:, :, None, :, None] * g.normal[rows, :, None, None, :])
         values, inside = _bilinear(gray, _distort(camera, pts) if camera is not None else pts)
         return values, inside.all(axis=3)
 
@@ -195,14 +226,14 @@ def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, 
     if coarse:
         e, found = _gradient_edge(values, step)
     else:
-        e, found = _area_edge(values, half, step, cell_across)
+        e, found = _area_edge(values, half, step, g.cell_across)
         found &= np.abs(e) < half[..., None]
         rows = np.flatnonzero(modelled.any(axis=1)) if modelled is not None else []
         if len(rows):  # the blurred-profile model on these markers' modelled edges
             n_off = int(np.ceil(np.max(model_reach[rows]) / PROFILE_STEP_PX))
             across = model_reach[rows, :, None] * (np.arange(-n_off, n_off + 1) / n_off)
             values_m, ok_m = profiles(rows, across)
-            e_m, found_m = _model_edge(values_m, across, cell_across[rows], model_reach[rows])
+            e_m, found_m = _model_edge(values_m, across, g.cell_across[rows], model_reach[rows])
             use = modelled[rows][..., None]
             e[rows] = np.where(use, e_m, e[rows])
             found[rows] = np.where(use, found_m, found[rows])
@@ -210,10 +241,7 @@ def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, 
     b_count = len(ideal)
     a, b, fitted = _robust_lines(s.reshape(b_count * 4, -1), e.reshape(b_count * 4, -1),
                                  (ok & found).reshape(b_count * 4, -1))
-    a, b = a.reshape(b_count, 4), b.reshape(b_count, 4)
-    p = start + a[..., None] * normal
-    direction = u + b[..., None] * normal
-    direction /= np.maximum(np.linalg.norm(direction, axis=2, keepdims=True), 1e-12)
+    p, direction = g.lines(a.reshape(b_count, 4), b.reshape(b_count, 4))
     return p, direction, (usable & fitted.reshape(b_count, 4)).all(axis=1)
 
 

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from tracking.errors import InputError, check_text_file
+from tracking.estimate import TOLERANCE_M
 from tracking.outputs import atomic_path
 
 AXES = ("dx", "dy", "dz")
@@ -26,7 +27,6 @@ MAX_SPAN_S = 86400.0  # a run of a day at most: the lag and availability grids o
 SHOWN_CHARS = 40  # of a bad cell, in its error
 UNSAFE_FILE_CHARS = re.compile(r"[^A-Za-z0-9_.-]")
 NO_VALUE = "–"  # a statistic of no samples, in the tables: never a bare nan
-TOLERANCE_M = 0.15  # concentricity requirement, shaded on the error plots
 LAG_GRID_HZ = 50.0
 MAX_LAG_S = 1.5
 MIN_MOTION_M = 0.05  # an axis must move at least this much (σ of the truth) for its lag to mean anything

@@ -13,7 +13,7 @@ import multiprocessing as mp
 import os
 import queue
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -21,8 +21,9 @@ import cv2
 
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
+from tracking.estimate import ConeEstimate
 from tracking.estimator import FilterTuning, TopsideFilter, filter_frame
-from tracking.filtering import ConeEstimate
+from tracking.images import Frame
 from tracking.pipeline import CameraTracker, FrameResult
 from tracking.rig import Rig, load_rig
 from tracking.sources import (
@@ -82,82 +83,99 @@ class LiveUpdate:
         return [self.results[k] if kind == 0 else self.estimates[k] for _, kind, k in order]
 
 
+@dataclass
+class _Channel:
+    """A camera worker's line to the main process: its queue, the stop event, and whether the main process lives."""
+
+    out: mp.Queue
+    stop: mp.Event
+    parent: object | None = field(default_factory=mp.parent_process)
+
+    def done(self) -> bool:
+        """Stop asked for, or the main process died without asking (killed): an orphan must not run on."""
+        if self.parent is not None and not self.parent.is_alive():
+            self.out.cancel_join_thread()  # nobody reads the queue any more: exit without waiting to flush it
+            return True
+        return self.stop.is_set()
+
+    def send(self, item: object, credit: mp.Semaphore | None = None) -> bool:
+        """Put an item on the queue, first taking a credit when given, waiting for either (a slower camera, a slow
+        main process) but not for a main process that is gone; False when the worker should stop."""
+        while credit is not None and not credit.acquire(timeout=WAIT_S):
+            if self.done():
+                return False
+        while True:
+            try:
+                self.out.put(item, timeout=WAIT_S)
+                return True
+            except queue.Full:
+                if self.done():
+                    return False
+
+
+def _send_frames(channel: _Channel, name: str, frames: Iterable[Frame], tracker: CameraTracker,
+                 late: Callable[[float], bool], credits: mp.Semaphore | None) -> bool:
+    """Track and send one pass of a camera's frames (a frozen image announced, not measured; a frame late for the live
+    clock only recorded); False when the worker should stop."""
+    freeze = FreezeDetector()
+    state = CameraState.STARTING
+    for frame in frames:
+        if channel.done():
+            return False
+        frozen = freeze.frozen(frame)
+        if frozen != (state == CameraState.FROZEN) or state == CameraState.STARTING:
+            state = CameraState.FROZEN if frozen else CameraState.LIVE
+            if not channel.send(SourceEvent(name, state, time.time(), "the image does not change" if frozen else "")):
+                return False
+        if frozen:
+            continue  # a frozen image re-stamped with new times would be a false measurement
+        result = tracker.skip(frame) if late(frame.time) else tracker.process(frame)
+        if frame.packet is not None:  # the packet carries the image: do not ship the pixels
+            result = replace(result, frame=replace(frame, gray=None, bgr=None))
+        if not channel.send(result, credits):
+            return False
+    return True
+
+
 def camera_worker(rig_path: Path, name: str, out: mp.Queue, stop: mp.Event, t0: mp.Value, origin: mp.Value,
                   speed: float, refinement: Refinement, realtime: bool, loop_until: float | None = None,
                   credits: mp.Semaphore | None = None) -> None:
     """Process entry: track one camera until its source ends, stop is set or the main process is gone; reconnect
     lost live sources. With credits (a replay flat out), each frame sent takes one, which the main process gives
     back when it has fused the frame: a camera cannot run ahead of the slowest by more than its credits."""
-    parent = mp.parent_process()
-
-    def done() -> bool:
-        """Stop asked for, or the main process died without asking (killed): an orphan must not run on."""
-        if parent is not None and not parent.is_alive():
-            out.cancel_join_thread()  # nobody reads the queue any more: exit without waiting to flush it
-            return True
-        return stop.is_set()
-
-    def send(item: object, credit: mp.Semaphore | None = None) -> bool:
-        """Put an item on the queue, first taking a credit when given, waiting for either (a slower camera, a slow
-        main process) but not for a main process that is gone; False when the worker should stop."""
-        while credit is not None and not credit.acquire(timeout=WAIT_S):
-            if done():
-                return False
-        while True:
-            try:
-                out.put(item, timeout=WAIT_S)
-                return True
-            except queue.Full:
-                if done():
-                    return False
-
+    channel = _Channel(out, stop)
     rig = load_rig(rig_path)
     entry = next(c for c in rig.cameras if c.name == name)
     cv2.setNumThreads(1)  # one process per camera already uses every core
     if hasattr(os, "nice"):
         os.nice(WORKER_NICE)  # when the cores are short, the main process (fusion, the live view) goes first
     tracker = CameraTracker.from_rig(rig, entry, refinement, packets=True, roi_tracking=True)
-    if not send(SourceEvent(name, CameraState.STARTING, time.time(), "ready", first_capture_time(rig, entry))):
+    if not channel.send(SourceEvent(name, CameraState.STARTING, time.time(), "ready", first_capture_time(rig, entry))):
         return
-    while t0.value == 0.0 and not done():
+    while t0.value == 0.0 and not channel.done():
         time.sleep(0.01)
     pacer = Pacer(t0.value, speed, origin.value)
     live_source = source_kind(entry.source) != SourceKind.FILE
 
-    def lateness(t: float) -> float:
-        """How far a frame's capture time is behind the live clock, s."""
-        return (time.time() + entry.time_offset - t) if live_source else pacer.now() - t
+    def late(t: float) -> bool:
+        """A frame's capture time is too far behind the live clock to search it in real time."""
+        behind = (time.time() + entry.time_offset - t) if live_source else pacer.now() - t
+        return realtime and behind > LATE_S
 
-    while not done():
-        freeze = FreezeDetector()
-        state = CameraState.STARTING
+    while not channel.done():
         try:
-            for frame in camera_frames(rig, entry, pacer, loop_until):
-                if done():
-                    return
-                frozen = freeze.frozen(frame)
-                if frozen != (state == CameraState.FROZEN) or state == CameraState.STARTING:
-                    state = CameraState.FROZEN if frozen else CameraState.LIVE
-                    if not send(SourceEvent(name, state, time.time(), "the image does not change" if frozen else "")):
-                        return
-                if frozen:
-                    continue  # a frozen image re-stamped with new times would be a false measurement
-                behind = realtime and lateness(frame.time) > LATE_S
-                result = tracker.skip(frame) if behind else tracker.process(frame)
-                if frame.packet is not None:  # the packet carries the image: do not ship the pixels
-                    result = replace(result, frame=replace(frame, gray=None, bgr=None))
-                if not send(result, credits):
-                    return
-            if not live_source:
-                send(SourceEvent(name, CameraState.ENDED, time.time(), "end of file"))
+            if not _send_frames(channel, name, camera_frames(rig, entry, pacer, loop_until), tracker, late, credits):
                 return
-            if not send(SourceEvent(name, CameraState.LOST, time.time(), "stream ended; reconnecting")):
+            if not live_source:
+                channel.send(SourceEvent(name, CameraState.ENDED, time.time(), "end of file"))
+                return
+            if not channel.send(SourceEvent(name, CameraState.LOST, time.time(), "stream ended; reconnecting")):
                 return
         except InputError as exc:
-            if not send(SourceEvent(name, CameraState.LOST, time.time(), f"{exc}; reconnecting")):
+            if not channel.send(SourceEvent(name, CameraState.LOST, time.time(), f"{exc}; reconnecting")):
                 return
             if not live_source:
-                send(SourceEvent(name, CameraState.ENDED, time.time(), str(exc)))
+                channel.send(SourceEvent(name, CameraState.ENDED, time.time(), str(exc)))
                 return
         stop.wait(RECONNECT_S)
 
@@ -293,7 +311,7 @@ class LiveTracker:
             update.results.append(result)
             if not result.tracked:
                 continue
-            measurements = [*result.offsets, *([result.observation] if result.observation is not None else [])]
+            measurements = result.measurements
             if measurements:
                 update.estimates.extend(filter_frame(self.kf, measurements))
 

@@ -7,10 +7,12 @@ from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Protocol
 
 from tracking.camera import CameraModel, load_camera
 from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetector, Refinement
 from tracking.errors import InputError
+from tracking.estimate import ConeEstimate
 from tracking.images import Frame, VideoHealth, frames, to_the_end
 from tracking.marker_tracker import MarkerTracker
 from tracking.offsets import (
@@ -46,6 +48,23 @@ class FrameResult:
     def time(self) -> float:
         """Capture time, s."""
         return self.frame.time
+
+    @property
+    def measurements(self) -> list[PairOffset | BodyObservation]:
+        """What the frame gives the estimators: its pair offsets, then its body observation (the fusion filter takes
+        the observation, which holds the pairs, when there is one: tracking.estimator.preferred)."""
+        return [*self.offsets, *([self.observation] if self.observation is not None else [])]
+
+
+class Sink(Protocol):
+    """What takes a run's stream of frames and estimates (viewer.session.Recorder, viewer.archive.ArchiveSink, the live
+    Foxglove stream): each frame as it is tracked, each estimate as the estimator gives it, then close once."""
+
+    def on_frame(self, result: FrameResult) -> None: ...
+
+    def on_estimate(self, estimate: ConeEstimate) -> None: ...
+
+    def close(self) -> None: ...
 
 
 @dataclass

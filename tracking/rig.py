@@ -225,7 +225,7 @@ class Marker(_Model):
     @cached_property
     def T_body_marker(self) -> np.ndarray:
         """(4, 4) pose of the marker in its body's frame; computed once (the model is frozen), read-only."""
-        T = transform(self.R_body_marker, self.center)
+        T = transform(self.R_body_marker, np.asarray(self.center, dtype=float))
         T.flags.writeable = False
         return T
 
@@ -422,7 +422,7 @@ def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
                    "not at the cone tip")
     loose = [c for c in rig.cameras if (c.time_offset_sigma or 0.0) > WARN_CLOCK_SIGMA_S]
     if loose:
-        worst = max(c.time_offset_sigma for c in loose)
+        worst = max(c.time_offset_sigma or 0.0 for c in loose)
         out.append(f"{path}: cameras[].time_offset_sigma: {', '.join(c.name for c in loose)} state clocks known to "
                    f"±{worst:.2g} s; the offsets' σ grows by the topside's motion over that time (at {WARN_SPEED_MPS} "
                    f"m/s, {worst * WARN_SPEED_MPS * 1000:.0f} mm), so moving cones may be withheld: measure them with "

@@ -1,6 +1,6 @@
 """`topside live --foxglove`: the MCAP archive's channels streamed live through foxglove-sdk's WebSocket server.
 
-The messages are built by viewer/archive.py's Archive, the one that writes `track --mcap` archives: its file is
+The messages are built by viewer.archive.Archive, the one that writes `track --mcap` archives: its file is
 replaced by ChannelWriter, which publishes each message on a channel of the same topic, schema and encoding
 (protobuf), so the live stream and the archive cannot drift. Foxglove opens it as a "Foxglove WebSocket" connection
 (ws://<address>:<port>); docs/foxglove-layout.json lays it out.
@@ -17,7 +17,7 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from tracking.camera import CameraModel, load_camera
-from tracking.filtering import ConeEstimate
+from tracking.estimate import ConeEstimate
 from tracking.live import LiveUpdate
 from tracking.pipeline import FrameResult
 from tracking.rig import Rig

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 import rerun as rr
 
-from tracking.filtering import ConeEstimate
+from tracking.estimate import ConeEstimate
 from tracking.geometry import quaternions_xyzw
 from tracking.rig import (
     DEFAULT_CONE_HEIGHT_M,

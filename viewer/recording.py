@@ -25,8 +25,8 @@ import pandas as pd
 import rerun as rr
 
 from tracking.camera import CameraModel
+from tracking.estimate import TOLERANCE_M, ConeEstimate
 from tracking.estimator import point_offset_matrix
-from tracking.filtering import ConeEstimate
 from tracking.geometry import quaternions_xyzw, rotation, transform
 from tracking.images import Frame, VideoHealth
 from tracking.pipeline import FrameResult
@@ -36,7 +36,6 @@ from tracking.rig import Rig
 APP_ID = "topside"
 TIMELINE = "capture_time"
 JPEG_QUALITY = 80
-TOLERANCE_M = 0.150  # concentricity requirement (paper, section I-D)
 MARKER_THICKNESS_M = 0.01
 AXIS_LENGTH_M = 0.5
 FRUSTUM_DEPTH_M = 5.0  # a frustum this deep shows its camera's image at installation scale (cameras 10-50 m off)

@@ -11,7 +11,6 @@ from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 import pandas as pd
@@ -20,13 +19,13 @@ import rerun.blueprint as rrb
 
 from tracking.camera import CameraModel, load_camera
 from tracking.errors import InputError
+from tracking.estimate import ConeEstimate
 from tracking.estimator import cone_points
 from tracking.evaluate import truth_at
-from tracking.filtering import ConeEstimate
 from tracking.images import Frame
 from tracking.live import STALE_S, LiveUpdate
 from tracking.outputs import partial_path, write_text
-from tracking.pipeline import FrameResult
+from tracking.pipeline import FrameResult, Sink
 from tracking.rig import Rig
 from viewer.archive import ArchiveInputs
 from viewer.blueprint import LayoutSender, analysis_blueprint
@@ -77,14 +76,6 @@ BACKLOG_TIMEOUT_S = 0.5  # ... but at most this long: a slow viewer must not sta
 CLOSE_TIMEOUT_S = 10.0  # at the end, a live viewer is waited for this long at most
 BACKLOG_MAX_PERIOD_S = 60.0  # after timeouts the period doubles up to this (a dead viewer costs < 1 % of the time)
 VIEWER_SCOPES = ("superintendent", "all")  # what a live viewer of the superintendent's layout is sent
-
-
-class Sink(Protocol):
-    """What takes the tracker's stream besides the recording (viewer/archive.py's ArchiveSink, the Foxglove stream)."""
-
-    def on_frame(self, result: FrameResult) -> None: ...
-
-    def on_estimate(self, estimate: ConeEstimate) -> None: ...
 
 
 class Compactor:
@@ -195,19 +186,23 @@ class Recorder:
         self._layout: Path | None = None  # segmented: the stored blueprint, merged into each segment when compacted
         self._view: rr.RecordingStream | None = None  # the viewer's own stream (superintendent scope), else None
         self._shown: set[str] = set()  # cameras whose images the viewer's own stream carries
-        if viewer is not None and layout == "superintendent" and viewer_scope == "superintendent":
+        self._open_sinks(viewer_scope)
+
+    def _open_sinks(self, viewer_scope: str) -> None:
+        """The viewer's own stream (superintendent scope) with its target circles, and the first file."""
+        if self._viewer is not None and self.layout == "superintendent" and viewer_scope == "superintendent":
             self._view = rr.RecordingStream(APP_ID, recording_id=self.rec.get_recording_id(),
                                             batcher_config=rr.ChunkBatcherConfig(flush_tick=BATCH_TICK_S,
                                                                                  flush_num_bytes=BATCH_BYTES))
-            self._view.set_sinks(rr.GrpcSink(viewer), default_blueprint=self._stored_blueprint())
+            self._view.set_sinks(rr.GrpcSink(self._viewer), default_blueprint=self._stored_blueprint())
             for cone in self.cones:
                 log_target_circle(self._view, cone, cone in self.marked)
         if self._rrd is not None:
             self._rrd.parent.mkdir(parents=True, exist_ok=True)
-            if segment_s:
+            if self._segment_s:
                 self._layout = self._rrd.with_name(f"{self._rrd.stem}.rbl")
                 self._stored_blueprint().save(APP_ID, self._layout)
-        self._open(self._writing_path(0) if segment_s else self._rrd)
+        self._open(self._writing_path(0) if self._segment_s else self._rrd)
 
     def _stored_blueprint(self) -> rrb.Blueprint:
         """The layout a file opens with."""

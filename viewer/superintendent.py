@@ -27,8 +27,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from tracking.estimate import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
 from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_M
-from tracking.filtering import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
 from tracking.live import STALE_S, CameraHealth
 from tracking.rig import Rig
 from tracking.sources import CameraState
@@ -81,7 +81,7 @@ class ConeReading:
     offset: np.ndarray  # (3,) Δx Δy Δz, m
     age: float  # now minus the newest accepted measurement, s
     cameras: tuple[str, ...]
-    withheld: str = ""  # why the estimator withheld the offset (tracking.filtering.WITHHELD_*), when it says
+    withheld: str = ""  # why the estimator withheld the offset (tracking.estimate.WITHHELD_*), when it says
 
 
 def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_measurement: float | None,

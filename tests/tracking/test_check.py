@@ -347,7 +347,7 @@ def test_a_single_cameras_depth_is_named_as_the_reason(clip: Path) -> None:
     """A cone whose σ lies along its one camera's line of sight: the reason says so and what would measure that axis;
     a σ across the view, or two cameras, say nothing of depth."""
     from tracking.check import depth_reason
-    from tracking.filtering import ConeEstimate
+    from tracking.estimate import ConeEstimate
 
     rig = load_rig(clip / "rig.yaml")
     camera = np.eye(4)

@@ -9,9 +9,9 @@ import pytest
 
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetection
+from tracking.estimate import WITHHELD_CLOCKS
 from tracking.estimator import TopsideFilter, fused_estimates, smoothed_estimates
 from tracking.estimator.noise import REPORT_WARMUP_S, VIEW_BIAS_TAU_S
-from tracking.filtering import WITHHELD_CLOCKS
 from tracking.geometry import rotation, rotvec
 from tracking.offsets import BodyObservation, PairOffset, body_geometry, observe_bodies
 from tracking.pose import Choice, estimate_pose, marker_object_points

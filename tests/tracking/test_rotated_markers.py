@@ -21,8 +21,8 @@ from tests.synthetic import (
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetector
 from tracking.estimator import TopsideFilter
-from tracking.filtering import paper_roles
 from tracking.offsets import body_geometry, frame_offsets, observe_bodies, pair_geometries
+from tracking.paper import paper_roles
 from tracking.pose import estimate_pose
 from tracking.rig import Rig
 

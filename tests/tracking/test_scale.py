@@ -9,8 +9,8 @@ import pytest
 from tests.tracking.test_fusion import ONE_CONE_EYES, K, one_cone_rig, one_cone_topside_T
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetection
+from tracking.estimate import WITHHELD_BELOW, WITHHELD_SCALE
 from tracking.estimator import FilterReport, fused_estimates
-from tracking.filtering import WITHHELD_BELOW, WITHHELD_SCALE
 from tracking.offsets import body_geometry, observe_bodies
 from tracking.pose import estimate_pose, marker_object_points
 from tracking.rig import Rig

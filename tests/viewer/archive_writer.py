@@ -15,10 +15,10 @@ import cv2
 import numpy as np
 
 from tracking.camera import load_camera
-from tracking.filtering import ConeEstimate
+from tracking.estimate import ConeEstimate
 from tracking.rig import load_rig
 from viewer.archive import Archive, ArchiveInputs, FrameView
-from viewer.manifest import load_private_key
+from viewer.archive.manifest import load_private_key
 
 FPS = 15
 T0_NS = 100 * 10**9

@@ -21,8 +21,8 @@ from mcap_protobuf.decoder import DecoderFactory
 from tests.conftest import FRAMES
 from tests.viewer.conftest import Archived
 from tracking.camera import load_camera
-from viewer.audit import verify
-from viewer.manifest import load_public_key
+from viewer.archive.audit import verify
+from viewer.archive.manifest import load_public_key
 from viewer.playback import rerun_binary, rerun_env
 
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]

@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from tests.viewer.conftest import Archived
-from viewer.audit import recover, scan, verify
+from viewer.archive.audit import recover, scan, verify
 
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]
 WRITER = [sys.executable, "-m", "tests.viewer.archive_writer"]

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 import rerun as rr
 
-from tracking.filtering import ConeEstimate
+from tracking.estimate import ConeEstimate
 from tracking.rig import DEFAULT_LEG_LENGTH_M, load_rig
 from viewer.blueprint import LayoutSender, blueprint_paths
 from viewer.installation import (

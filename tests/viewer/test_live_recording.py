@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from rerun.chunk import RrdReader
 
-from tracking.filtering import WITHHELD_CLOCKS, WITHHELD_SCALE, ConeEstimate
+from tracking.estimate import WITHHELD_CLOCKS, WITHHELD_SCALE, ConeEstimate
 from viewer.readback import chunks_by_entity, component_rows
 from viewer.superintendent import ConeState, cone_markdown, cone_reading, no_data_reason
 

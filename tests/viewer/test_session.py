@@ -187,7 +187,7 @@ def test_a_viewer_that_is_gone_neither_slows_nor_loses_the_recording(installatio
 
 def test_a_live_update_lands_in_the_segments_that_span_its_times(installation: Path, tmp_path: Path) -> None:
     """One update holding frames across a segment boundary, and their estimates: each in the file of its time."""
-    from tracking.filtering import ConeEstimate
+    from tracking.estimate import ConeEstimate
     from tracking.live import LiveUpdate
     from tracking.pipeline import track_rig
     from tracking.rig import load_rig

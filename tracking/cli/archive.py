@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
     from tracking.rig import Rig
     from viewer.archive import ArchiveSink
-    from viewer.audit import Report
+    from viewer.archive.audit import Report
 
 MAX_FINDINGS = 50  # printed by `verify`; the rest are counted
 
@@ -38,7 +38,7 @@ class ArchiveSettings:
     @classmethod
     def read(cls, key: Path | None, vessel: str, operator: str, video: VideoFormat) -> ArchiveSettings:
         """The settings, the signing key read now (before any work starts: a bad key is found at once)."""
-        from viewer.manifest import load_private_key
+        from viewer.archive.manifest import load_private_key
 
         return cls(load_private_key(key) if key is not None else None, vessel, operator, video)
 
@@ -66,7 +66,7 @@ def export(
     video: VideoOption = VideoFormat.JPEG,
 ) -> None:
     """Write the MCAP audit archive of a recording: the same content `track --mcap` writes."""
-    from viewer.export import export_recording
+    from viewer.archive.export import export_recording
 
     check_outputs({"--mcap": mcap}, [recording, offsets, key])
     settings = ArchiveSettings.read(key, vessel, operator, video)
@@ -88,8 +88,8 @@ def verify(
                                                                  "NAME.recovered.mcap).")] = None,
 ) -> None:
     """Check an archive: CRCs, indexes, every channel non-empty, the manifest's SHA-256 digests, the signature."""
-    from viewer.audit import verify as verify_file
-    from viewer.manifest import load_public_key
+    from viewer.archive.audit import verify as verify_file
+    from viewer.archive.manifest import load_public_key
 
     public = load_public_key(key) if key is not None else None
     if recover:
@@ -103,9 +103,9 @@ def verify(
 def _recover(archive: Path, target: Path, key: Path | None) -> Path:
     """`verify --recover`: the file to check, target rebuilt from a damaged or killed writer's archive, or the
     archive itself when it is intact (nothing written)."""
-    from viewer.audit import is_intact
-    from viewer.audit import recover as recover_file
-    from viewer.manifest import time_text
+    from viewer.archive.audit import is_intact
+    from viewer.archive.audit import recover as recover_file
+    from viewer.archive.manifest import time_text
 
     check_outputs({"--out": target}, [archive, key])
     if is_intact(archive):

@@ -23,9 +23,9 @@ from tracking.outputs import Outputs, check_outputs
 if TYPE_CHECKING:
     import subprocess
 
-    from tracking.filtering import ConeEstimate
+    from tracking.estimate import ConeEstimate
     from tracking.live import LiveTracker
-    from tracking.report import OffsetsWriter
+    from tracking.offsets_csv import OffsetsWriter
     from tracking.rig import Rig
     from viewer.foxglove_live import FoxgloveStream
     from viewer.session import Recorder
@@ -174,7 +174,7 @@ class LiveSession:
         """Track every camera (video files replayed at speed) until duration s of capture time (None: until stopped)
         into the recording, in segment_s files and streamed to the viewer at viewer_url, and the offsets CSV."""
         from tracking.live import LiveTracker
-        from tracking.report import OffsetsWriter
+        from tracking.offsets_csv import OffsetsWriter
         from viewer.session import Recorder
 
         self.recorder = Recorder(self.rig, self.rrd, viewer=viewer_url, segment_s=segment_s, stale_s=stale_s,

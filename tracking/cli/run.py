@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Protocol
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -52,12 +52,12 @@ if TYPE_CHECKING:
     from rich.progress import Progress, TaskID
 
     from tracking.batch import Installation, Outcome
+    from tracking.estimate import ConeEstimate
     from tracking.estimator import FilterReport, Measurement
     from tracking.evaluate import Evaluation
-    from tracking.filtering import ConeEstimate
+    from tracking.offsets_csv import OffsetsWriter
     from tracking.parallel import Runner, VideoPlan
-    from tracking.pipeline import FrameResult, TrackStats
-    from tracking.report import OffsetsWriter
+    from tracking.pipeline import Sink, TrackStats
     from tracking.rig import Rig
 
 # tracking.estimator.ESTIMATORS' values: (rig, measurements, report)
@@ -65,16 +65,6 @@ Estimator = Callable[..., Iterable["ConeEstimate"]]
 
 DEMO_SCENARIO = "config2-procedure5-weather"
 DEMO_DURATION_S = 20.0
-
-
-class RunSink(Protocol):
-    """What takes a run's frames and estimates besides the CSV: viewer.session.Recorder, viewer.archive.ArchiveSink."""
-
-    def on_frame(self, result: FrameResult) -> None: ...
-
-    def on_estimate(self, estimate: ConeEstimate) -> None: ...
-
-    def close(self) -> None: ...
 
 
 @dataclass
@@ -90,7 +80,7 @@ class RunLoop:
     plans: list[VideoPlan]
     stats: TrackStats
     advance: Callable[[], None] = lambda: None
-    sinks: list[RunSink] = field(default_factory=list)
+    sinks: list[Sink] = field(default_factory=list)
     roi: bool = False
     warn: bool = False
     writer: OffsetsWriter | None = None  # the offsets CSV's, once open
@@ -113,15 +103,13 @@ class RunLoop:
                 warn_lines(result.warnings)
             for sink in self.sinks:
                 sink.on_frame(result)
-            yield from result.offsets
-            if result.observation is not None:
-                yield result.observation
+            yield from result.measurements
 
     def write(self, csv: Path, estimator: Estimator, report: FilterReport | None = None) -> None:
         """The estimator's offsets into csv and the sinks. The sinks are closed after the CSV however the loop ends
         (an archive attaches the finished CSV); while an error propagates, a sink that fails to close does not hide
         it."""
-        from tracking.report import OffsetsWriter
+        from tracking.offsets_csv import OffsetsWriter
 
         try:
             with OffsetsWriter(csv) as self.writer:
@@ -140,7 +128,7 @@ class RunLoop:
 
 
 def recorder(rig: Rig, path: Path, truth_df: pd.DataFrame | None, options: dict[str, str],
-             show_rejected: bool = False) -> RunSink:
+             show_rejected: bool = False) -> Sink:
     """The Rerun recording of a run (the command line composes tracker and viewer; tracking/ never imports viewer)."""
     from viewer.session import Recorder
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tracking.estimate import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
 from tracking.estimator.measurements import Measurement, corner_update, nearest, pair_rows, renew
 from tracking.estimator.noise import (
     AMBIGUOUS_VARIANCE_GAIN,
@@ -35,7 +36,6 @@ from tracking.estimator.noise import (
 from tracking.estimator.placement import place_camera, place_topside
 from tracking.estimator.process import Transition, rate_decay
 from tracking.estimator.state import CameraState, FilterState, point_offset_matrix
-from tracking.filtering import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
 from tracking.geometry import numeric_jacobian, pose_params, rotation
 from tracking.offsets import BodyObservation
 from tracking.pose import Choice
@@ -165,10 +165,10 @@ class TopsideFilter(FilterState):
 
             p0 = pose_params(T)
             J = numeric_jacobian(distance, p0)
-            sample = survey_sample(o.camera, i, float(distance(p0)[0]), float(np.sqrt(J @ cov @ J.T)[0, 0]),
+            surveyed = survey_sample(o.camera, i, float(distance(p0)[0]), float(np.sqrt(J @ cov @ J.T)[0, 0]),
                                    float(np.linalg.norm(position - c)), sigma)
-            if sample is not None:
-                self.scale.add(sample, o.time)
+            if surveyed is not None:
+                self.scale.add(surveyed, o.time)
 
     def clock_bound(self, cameras: tuple[str, ...]) -> float:
         """σ, s, of the time an estimate resting on these cameras (all when none) is the topside's: the largest of their

@@ -8,12 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
 
+from tracking.estimate import ConeEstimate
 from tracking.estimator.filter import FilterReport, TopsideFilter
 from tracking.estimator.measurements import Measurement, frames, preferred
 from tracking.estimator.noise import FilterTuning
 from tracking.estimator.smoother import smoothed_estimates
-from tracking.filtering import ConeEstimate, paper_filter, raw_estimates
 from tracking.offsets import PairOffset
+from tracking.paper import paper_filter, raw_estimates
 from tracking.rig import Rig
 
 

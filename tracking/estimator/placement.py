@@ -114,9 +114,9 @@ def settle(s: FilterState, cam: CameraState, o: BodyObservation, options: Option
         h.add(_by_hypothesis(order, [(t / LEVEL_SIGMA_RAD) ** 2 for t in tilts]), o.time, "the topside's tilt")
     _survey_evidence(s, cam, h, o.time, positions, options, order)
     h.step(o.time)
-    k = h.decided()
-    if k is not None:
-        return h.pose(k)
+    decided = h.decided()
+    if decided is not None:
+        return h.pose(decided)
     if one_option(options) and h.span >= ONE_OPTION_WAIT_S:  # near square on: between them
         return h.one()
     apart = np.degrees(rotation_angle(options[0][0][:3, :3], options[1][0][:3, :3]))

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tracking.estimate import ConeEstimate
 from tracking.estimator.filter import FilterReport, TopsideFilter
 from tracking.estimator.measurements import Measurement, frames
 from tracking.estimator.noise import SMOOTHER_LAG_S, SMOOTHER_SPAN_S, FilterTuning
 from tracking.estimator.process import Transition
-from tracking.filtering import ConeEstimate
 from tracking.rig import Rig
 
 

@@ -84,7 +84,8 @@ class ConsiderStates:
     @classmethod
     def of(cls, rig: Rig, first: int) -> ConsiderStates:
         """The rig's survey σ of its markers that are not references, from index first."""
-        markers, prior = {}, []
+        markers: dict[int, int] = {}
+        prior: list[float] = []
         for marker in rig.markers:
             sigma = rig.marker_sigma(marker)
             if sigma is not None and (sigma.tilt_rad().any() or sigma.position().any()):

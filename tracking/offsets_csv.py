@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from tracking.filtering import ConeEstimate
+from tracking.estimate import ConeEstimate
 
 OFFSET_COLUMNS = ("time", "cone", "dx", "dy", "dz", "cameras", "sdx", "sdy", "sdz", "withheld")  # sd*: 1σ, m;
-# withheld: why dx, dy, dz are empty, where the estimator says (tracking.filtering.WITHHELD_*)
+# withheld: why dx, dy, dz are empty, where the estimator says (tracking.estimate.WITHHELD_*)
 FLUSH_ROWS = 100  # rows between flushes: a killed run keeps all but the last few
 
 

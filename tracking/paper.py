@@ -1,37 +1,17 @@
-"""Time filtering of offsets. The paper's mode: a 10-sample running average per channel (eq. 17–21)."""
+"""The paper's estimators: its 10-sample running average per channel (eq. 17–21), and every pair offset raw."""
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator
 
 import numpy as np
 
+from tracking.estimate import ConeEstimate
 from tracking.offsets import PairOffset
 from tracking.rig import Rig
 
 PAPER_WINDOW = 10  # samples (eq. 17–20)
-WITHHELD_SIGMA = "σ too large"  # the cameras do not see the cone well enough
-WITHHELD_CLOCKS = "clocks not measured"  # σ within bounds but for the topside's motion over its cameras' clock σ
-WITHHELD_SCALE = "rig error: marker size"  # the markers do not look the size the rig states (tracking.scale)
-WITHHELD_BELOW = "rig error: through the cones"  # the offset puts the topside below its cone tips: no set-down can
-
-
-@dataclass(frozen=True)
-class ConeEstimate:
-    """The offset at one cone at one capture time, and the cameras it rests on."""
-
-    time: float  # s, capture time of the newest frame that contributed
-    cone: str
-    offset: np.ndarray  # (3,) dx, dy, dz in the jacket frame, m; NaN where no camera gives the axis
-    cameras: tuple[str, ...]
-    covariance: np.ndarray | None = None  # (3, 3) m², where the estimator knows it
-    T_jacket_cameras: Mapping[str, np.ndarray] | None = None  # (4, 4) per placed camera, where the estimator keeps
-    # the cameras' poses (the live fused filter); one mapping shared by the estimates of one time
-    withheld: str = ""  # why the offset is NaN, in a few words (WITHHELD_*), where the estimator withheld it
-
-
 def paper_roles(rig: Rig) -> dict[tuple[str, str], str]:
     """(cone, face) -> "x" or "y": the face whose outward normal runs closer to jacket y (so that its plane holds jacket
     x) is the paper's camera 1. By the normal, not the marker's x axis: a marker may be mounted turned about it."""

@@ -1,7 +1,7 @@
 """Checking an MCAP archive (CRCs, indexes, non-empty channels, manifest, signature) and recovering a killed one.
 
 One pass over the file's records in place (mmap): every chunk is decompressed, CRC-checked and its messages
-digested per channel and time block as viewer/manifest.py defines; the summary's indexes and statistics are
+digested per channel and time block as viewer/archive/manifest.py defines; the summary's indexes and statistics are
 compared with what the pass found; the stored manifest with the recomputed digests.
 """
 
@@ -40,7 +40,7 @@ from mcap.records import (
 )
 
 from tracking.errors import InputError
-from viewer.manifest import (
+from viewer.archive.manifest import (
     BLOCK_S,
     CHECKPOINT_NAME,
     MANIFEST_NAME,
@@ -536,7 +536,7 @@ def scan_header(path: Path) -> Header | None:
 
 def recover(path: Path, out: Path) -> Recovery:
     """Rewrite every complete, intact chunk, attachment and metadata record of a damaged file into a valid one."""
-    from viewer.archive import ArchiveFile, time_span
+    from viewer.archive.file import ArchiveFile, time_span
 
     path, out = Path(path), Path(out)
     if path.resolve() == out.resolve():

@@ -20,9 +20,10 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from tracking.camera import load_camera
 from tracking.errors import InputError
-from tracking.filtering import ConeEstimate
+from tracking.estimate import ConeEstimate
 from tracking.rig import load_rig
-from viewer.archive import Archive, ArchiveInputs, FrameView
+from viewer.archive.frames import FrameView
+from viewer.archive.writer import Archive, ArchiveInputs
 from viewer.readback import chunks_by_entity
 from viewer.recording import AXES, FILTER_CAMERAS, TIMELINE
 
