@@ -128,9 +128,11 @@ def _marker_bits(fs: cv2.FileStorage, path: Path, index: int, bits: int) -> np.n
     return np.frombuffer(code.encode(), dtype=np.uint8).reshape(bits, bits) - ord("0")
 
 
-def detector_parameters(refinement: Refinement = DEFAULT_REFINEMENT) -> cv2.aruco.DetectorParameters:
-    """OpenCV detector parameters with our corner refinement."""
+def detector_parameters(refinement: Refinement = DEFAULT_REFINEMENT, inverted: bool = False
+                        ) -> cv2.aruco.DetectorParameters:
+    """OpenCV detector parameters with our corner refinement; inverted: the markers are printed white on black."""
     params = cv2.aruco.DetectorParameters()
+    params.detectInvertedMarker = inverted
     refinement = Refinement(refinement)
     params.cornerRefinementMethod = _CV_REFINE[EDGES_START if refinement.fits_edges else refinement]
     params.cornerRefinementWinSize = SUBPIX_WIN
@@ -169,12 +171,13 @@ class MarkerDetector:
 
     def __init__(self, dictionary: str | cv2.aruco.Dictionary = "DICT_6X6_250",
                  refinement: Refinement = DEFAULT_REFINEMENT, camera: CameraModel | None = None,
-                 rain_filter: int = RAIN_FILTER_PX) -> None:
+                 rain_filter: int = RAIN_FILTER_PX, inverted: bool = False) -> None:
         self.dictionary = load_dictionary(dictionary) if isinstance(dictionary, str) else dictionary
         self.refinement = Refinement(refinement)
         self.camera = camera  # with Refinement.EDGES, edges are fitted as straight lines in undistorted pixels
         self.rain_filter = rain_filter  # 0 switches the second pass off
-        self._detector = cv2.aruco.ArucoDetector(self.dictionary, detector_parameters(self.refinement))
+        self.inverted = inverted  # white markers on black: found as such, their edges fitted on the negative
+        self._detector = cv2.aruco.ArucoDetector(self.dictionary, detector_parameters(self.refinement, inverted))
         self._kernel = np.ones((rain_filter, rain_filter), np.uint8) if rain_filter > 1 else None
 
     def opening(self, gray: np.ndarray) -> np.ndarray | None:
@@ -205,14 +208,20 @@ class MarkerDetector:
         """
         cells = self.dictionary.markerSize + 2
         blur_model = self.refinement == Refinement.BLURRED
+
+        def fit(image: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """The edge fit expects a dark square in a bright margin: a white print's negative (rain removed first)."""
+            return refine_corners_batch(cv2.bitwise_not(image) if self.inverted else image, q, self.camera, cells,
+                                        blur_model)
+
         if opened is None:
-            return refine_corners_batch(gray, quads, self.camera, cells, blur_model)
+            return fit(gray, quads)
         side = np.linalg.norm(np.diff(np.concatenate([quads, quads[:, :1]], axis=1), axis=1), axis=2).mean(axis=1)
         big = side / cells >= RAIN_REFINE_MIN_CELL_PX
         out, ok = quads.copy(), np.zeros(len(quads), dtype=bool)
         for mask, image in ((big, destreaked(gray, opened) if big.any() else gray), (~big, gray)):
             if mask.any():
-                out[mask], ok[mask] = refine_corners_batch(image, quads[mask], self.camera, cells, blur_model)
+                out[mask], ok[mask] = fit(image, quads[mask])
         return out, ok
 
     def detect(self, gray: np.ndarray, keep_rejected: bool = False) -> Detections:

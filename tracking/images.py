@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -11,6 +12,7 @@ import cv2
 import numpy as np
 
 from tracking.errors import InputError
+from tracking.frame_times import FrameClock, as_clock
 
 LUMA_FIRST_FORMATS = {"yuv420p", "yuvj420p", "yuv422p", "yuvj422p", "yuv444p", "yuvj444p", "nv12", "nv21", "gray"}
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm"}
@@ -51,6 +53,7 @@ class VideoHealth:
     backwards: int = 0  # frames whose time is before the previous frame's: dropped
     repeated: int = 0  # frames whose time equals the previous frame's: dropped
     damaged: int = 0  # frames decoded from a packet cut short or broken: dropped
+    unlisted: int = 0  # frames the camera's times file gives no capture time: dropped
     jumps: int = 0  # gaps longer than jump_s() between consecutive frames
     largest_jump_s: float = 0.0
     largest_jump_at_s: float = 0.0  # where the largest jump starts, s after the first frame
@@ -116,6 +119,12 @@ class VideoHealth:
         self._kept += 1
         return t
 
+    def unlisted_frame(self, index: int) -> None:
+        """Count a frame the times file lists no capture time for (said once)."""
+        self.unlisted += 1
+        if self.unlisted == 1:
+            self._note(f"frame {index} has no capture time in the camera's times file: frames without one are dropped")
+
     def finish(self) -> None:
         """The source has no more frames."""
         self.ended = True
@@ -168,11 +177,14 @@ class VideoHealth:
         if self.untimed:
             out.append(f"{counted(self.untimed, 'frame')} had no timestamp (stamped at the nominal "
                        f"{1 / self.interval_s:.4g} fps)")
+        if self.unlisted:
+            out.append(f"{counted(self.unlisted, 'frame')} without a time in the times file dropped")
         return out
 
     def troubled(self) -> bool:
         """True when anything went wrong (cheap: no text)."""
-        return bool(self.backwards or self.repeated or self.damaged or self.jumps or self.untimed or self.short())
+        return bool(self.backwards or self.repeated or self.damaged or self.jumps or self.untimed or self.unlisted
+                    or self.short())
 
     def summary(self) -> str:
         """The problems as one line ('' for a sound source)."""
@@ -225,18 +237,19 @@ def passes_through(stream: av.video.stream.VideoStream) -> bool:
     return stream.codec_context.name == "h264" and not stream.codec_context.has_b_frames
 
 
-def decoded_frames(container: av.container.InputContainer, source: str | Path, time_offset: float = 0.0,
+def decoded_frames(container: av.container.InputContainer, source: str | Path, time_offset: float | FrameClock = 0.0,
                    keep_color: bool = False, packets: bool = False, health: VideoHealth | None = None,
-                   chunk: tuple[int | None, int | None] | None = None, threads: str = "AUTO") -> Iterator[Frame]:
-    """Frames of an open container; capture time = presentation time + time_offset.
+                   chunk: tuple[int | None, int | None] | None = None, threads: str = "AUTO",
+                   first_index: int = 0) -> Iterator[Frame]:
+    """Frames of an open container; capture time = presentation time + time_offset, or with a FrameClock that has a
+    times file, the file's time of the frame (frame number first_index + the frames decoded here) + its offset.
 
     With packets=True, each frame also carries its H.264 packet in Annex B (when the stream passes through).
     health: filled as the frames go (see VideoHealth); a frame whose time is not after the previous one, or decoded
-    from a damaged packet, is dropped.
-    chunk: (pts of a keyframe, None for the first; packets to decode from it, None for all): only that part of the
-    video, decoded on its own (the decoder flushed after its last packet); frame numbers count from the keyframe
-    (tracking.parallel puts them back).
-    """
+    from a damaged packet, is dropped. chunk: (pts of a keyframe, None for the first; packets to decode from it, None
+    for all): only that part, decoded on its own; frame numbers count from the keyframe (tracking.parallel puts them
+    back)."""
+    clock = as_clock(time_offset)
     stream = container.streams.video[0]
     stream.thread_type = threads
     health = health if health is not None else VideoHealth()
@@ -274,8 +287,11 @@ def decoded_frames(container: av.container.InputContainer, source: str | Path, t
                 own = waiting.pop(0) if waiting else None
                 if waiting == []:
                     del pending[frame.pts]
-                if t is not None:
-                    yield _frame(frame, index, t + time_offset, keep_color, own, health.report())
+                capture = clock.capture(first_index + index, t) if t is not None else None
+                if capture is not None and math.isnan(capture):
+                    health.unlisted_frame(first_index + index)
+                elif capture is not None:
+                    yield _frame(frame, index, capture, keep_color, own, health.report())
                 index += 1
     except av.error.FFmpegError as exc:
         raise InputError(source, f"video is damaged after frame {index} ({exc.strerror or exc})") from None
@@ -327,7 +343,7 @@ def _frame(frame: av.VideoFrame, index: int, time: float, keep_color: bool, pack
                  packet=packet[0] if packet else None, keyframe=packet[1] if packet else False, video=video)
 
 
-def video_frames(source: str | Path, time_offset: float = 0.0, keep_color: bool = False,
+def video_frames(source: str | Path, time_offset: float | FrameClock = 0.0, keep_color: bool = False,
                  packets: bool = False, health: VideoHealth | None = None) -> Iterator[Frame]:
     """Decode a video (file or URL) with PyAV; capture time = presentation time + time_offset."""
     with open_video(source) as container:
@@ -349,13 +365,13 @@ def to_the_end(frames: Iterable[Frame], health: VideoHealth) -> Iterator[Frame]:
         yield held
 
 
-def frames(source: str | Path, time_offset: float = 0.0, keep_color: bool = False, packets: bool = False,
+def frames(source: str | Path, time_offset: float | FrameClock = 0.0, keep_color: bool = False, packets: bool = False,
            health: VideoHealth | None = None) -> Iterator[Frame]:
     """Frames of an image file (one frame at time_offset) or a video (health: see decoded_frames)."""
     if is_image(source):
         gray = read_gray(source)
         bgr = cv2.imread(str(source), cv2.IMREAD_COLOR) if keep_color else None
-        yield Frame(index=0, time=time_offset, gray=gray, bgr=bgr)
+        yield Frame(index=0, time=as_clock(time_offset).offset, gray=gray, bgr=bgr)
         return
     if not str(source).startswith(("rtsp:", "http:", "https:")) and not Path(source).is_file():
         raise InputError(source, "image or video not found")

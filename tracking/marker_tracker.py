@@ -196,7 +196,7 @@ class MarkerTracker:
         self.full_searches = 0  # whole-frame searches so far (for benchmarks and tests)
         self._force_full = False
         self._edges = detector.refinement.fits_edges  # corners are re-fitted: coarse searches are fine
-        self._params = detector_parameters(detector.refinement)
+        self._params = detector_parameters(detector.refinement, detector.inverted)
         self._roi_detector = cv2.aruco.ArucoDetector(detector.dictionary, self._params)
         self._full: dict[tuple[int, int, bool], cv2.aruco.ArucoDetector] = {}
         self._buffer: np.ndarray | None = None  # reused (H, W) image the edges are fitted on
@@ -265,7 +265,8 @@ class MarkerTracker:
         """A whole-frame detector for markers of at least min_side px, ArUco3 or not (cached by whole pixels)."""
         key = (int(min_side), image_size, aruco3)
         if key not in self._full:
-            params = sized_parameters(detector_parameters(self.detector.refinement), int(min_side), image_size)
+            base = detector_parameters(self.detector.refinement, self.detector.inverted)
+            params = sized_parameters(base, int(min_side), image_size)
             if aruco3:
                 params = aruco3_parameters(params, int(min_side), image_size)
             self._full[key] = cv2.aruco.ArucoDetector(self.detector.dictionary, params)

@@ -157,6 +157,8 @@ class BodyObservation:
     corners: dict[int, np.ndarray] = field(default_factory=dict)  # id -> (4, 2) undistorted (ideal) pixels
     K: np.ndarray = field(default_factory=lambda: np.eye(3))  # (3, 3) camera matrix of the ideal pixels
     scale: tuple[ScaleSample, ...] = ()  # the markers' size against the rig's, from two markers of one body
+    model_px: float = 0.0  # RMS reprojection error of the camera's calibration, px (0: not stated): how well its model
+    # maps a point, which no corner of it can beat
 
     @property
     def choice(self) -> Choice:
@@ -177,10 +179,12 @@ def observe_bodies(geometry: BodyGeometry, poses: dict[int, MarkerPose], camera:
         return None
     corners = {i: camera.undistort_points(p.corners) for i, p in poses.items()
                if i in geometry.jacket or i in geometry.topside}
-    return BodyObservation(time, name, bodies[0], bodies[1], corners, camera.K, separations(geometry, poses, name))
+    return BodyObservation(time, name, bodies[0], bodies[1], corners, camera.K,
+                           separations(geometry, poses, name, marker_size), camera.rms or 0.0)
 
 
-def separations(geometry: BodyGeometry, poses: dict[int, MarkerPose], name: str) -> tuple[ScaleSample, ...]:
+def separations(geometry: BodyGeometry, poses: dict[int, MarkerPose], name: str, marker_size: float
+                ) -> tuple[ScaleSample, ...]:
     """Scale samples (tracking.scale) from every two markers of one body one frame shows: their separation in the
     rig against the one measured (their IPPE translations, the same for both solutions)."""
     out = []
@@ -191,7 +195,7 @@ def separations(geometry: BodyGeometry, poses: dict[int, MarkerPose], name: str)
                 sample = separation_sample(
                     name, (i, j), poses[i].T_camera_marker, poses[j].T_camera_marker,
                     poses[i].covariance[3:, 3:], poses[j].covariance[3:, 3:],
-                    float(np.linalg.norm(markers[i][:3, 3] - markers[j][:3, 3])))
+                    float(np.linalg.norm(markers[i][:3, 3] - markers[j][:3, 3])), marker_size)
                 if sample is not None:
                     out.append(sample)
     return tuple(out)

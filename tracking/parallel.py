@@ -12,6 +12,7 @@ B-frames, not a file) is one chunk.
 from __future__ import annotations
 
 import heapq
+import math
 import os
 import resource
 import time
@@ -25,6 +26,7 @@ from typing import Any, Protocol
 from tracking.camera import load_camera
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
+from tracking.frame_times import FrameClock
 from tracking.images import VideoHealth, decoded_frames, frames, is_image, open_video
 from tracking.pipeline import CameraTracker, FrameResult, TrackStats
 from tracking.rig import CameraEntry, Rig, load_rig
@@ -110,10 +112,11 @@ def plan_video(rig: Rig, entry: CameraEntry, chunk_frames: int = CHUNK_FRAMES) -
     still image or a stream is one chunk."""
     src = source_path(rig, entry)
     health = VideoHealth()
+    clock = rig.clock(entry)
 
     def whole(reason: str, count: int | None = None) -> VideoPlan:
-        return VideoPlan(entry.name, (Chunk(entry.name, 0, None, None, 0, entry.time_offset),), health, count or 0,
-                         reason)
+        return VideoPlan(entry.name, (Chunk(entry.name, 0, None, None, 0, clock.capture(0, 0.0)),), health,
+                         count or 0, reason)
 
     if isinstance(src, str) or is_image(src) or not Path(src).is_file():
         return whole("not a video file")
@@ -149,8 +152,7 @@ def plan_video(rig: Rig, entry: CameraEntry, chunk_frames: int = CHUNK_FRAMES) -
     chunks = []
     for k, (before, pts) in enumerate(starts):
         count = starts[k + 1][0] - before if k + 1 < len(starts) else None
-        chunks.append(Chunk(entry.name, k, pts if k else None, count, before,
-                            float(pts * base) + entry.time_offset))
+        chunks.append(Chunk(entry.name, k, pts if k else None, count, before, clock.capture(before, float(pts * base))))
     return VideoPlan(entry.name, tuple(chunks), health, n)
 
 
@@ -190,12 +192,12 @@ def _run_chunk(task: ChunkTask, t0: float, c0: float) -> ChunkResult:
                                          roi_tracking=task.roi_tracking)
         src = source_path(rig, entry)
         if chunk.start_pts is None and chunk.packets is None:  # the whole video (or image, or stream) in one
-            source = frames(src, entry.time_offset, packets=task.packets, health=log)
+            source = frames(src, rig.clock(entry), packets=task.packets, health=log)
         else:
             container = open_video(src)
-            source = _closing(container, decoded_frames(container, src, entry.time_offset, packets=task.packets,
+            source = _closing(container, decoded_frames(container, src, rig.clock(entry), packets=task.packets,
                                                         health=log, chunk=(chunk.start_pts, chunk.packets),
-                                                        threads=task.threads))
+                                                        threads=task.threads, first_index=chunk.packets_before))
         for frame in source:
             result = tracker.process(frame)
             keep = task.keep_gray and frame.packet is None
@@ -373,7 +375,7 @@ class Scheduler:
         return result
 
 
-def replay(plan: VideoPlan, take: Callable[[Chunk], ChunkResult], time_offset: float, health: VideoHealth,
+def replay(plan: VideoPlan, take: Callable[[Chunk], ChunkResult], clock: FrameClock, health: VideoHealth,
            first_warning: bool = True) -> Iterator[FrameResult]:
     """One camera's frames from its chunks' results, as one pass over the video gives them: frame numbers, dropped
     frames and health replayed through `health` (declared as the plan's), the last frame carrying the health at the
@@ -390,10 +392,14 @@ def replay(plan: VideoPlan, take: Callable[[Chunk], ChunkResult], time_offset: f
             t = health.stamp(pts, damaged)
             if t is None:
                 continue  # dropped here (the chunk's own pass may have kept it: it did not see the frames before)
+            capture = clock.capture(health.decoded - 1, t)
+            if math.isnan(capture):
+                health.unlisted_frame(health.decoded - 1)
+                continue
             r = result.results.get(k)
             if r is None and result.error is not None:
                 raise InputError(*result.error)  # met on this frame (its size, say): where one pass meets it
-            if r is None or r.frame.time != t + time_offset:
+            if r is None or r.frame.time != capture:
                 raise RuntimeError(f"{plan.camera}: chunk {chunk.number} disagrees with its video at frame {k}")
             warnings = r.warnings if not seen_first else ()
             seen_first = True
@@ -443,5 +449,5 @@ def track_chunks(rig: Rig, run: Runner, refinement: Refinement = DEFAULT_REFINEM
     sched = Scheduler(run, tasks, window or max(2 * run.workers, run.workers + len(plans)))
     if scheduler is not None:
         scheduler.append(sched)
-    streams = [replay(p, sched.take, entries[p.camera].time_offset, healths[p.camera]) for p in plans]
+    streams = [replay(p, sched.take, rig.clock(entries[p.camera]), healths[p.camera]) for p in plans]
     yield from heapq.merge(*streams, key=lambda r: r.time)

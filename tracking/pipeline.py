@@ -15,6 +15,7 @@ from tracking.errors import InputError
 from tracking.estimate import ConeEstimate
 from tracking.images import Frame, VideoHealth, frames, to_the_end
 from tracking.marker_tracker import MarkerTracker
+from tracking.mirror import drop_mirrored, mirror_ambiguous
 from tracking.offsets import (
     BodyGeometry,
     BodyObservation,
@@ -43,6 +44,8 @@ class FrameResult:
     tracked: bool = True  # False: recorded only (not searched, or not fused), to keep up in real time
     warnings: tuple[str, ...] = ()  # one line each, for the command to print: the calibration's size taken from this
     # (the camera's first) frame
+    mirrored: tuple[int, ...] = ()  # ids detected that may be mirrored and that nothing confirmed: dropped
+    # (tracking.mirror)
 
     @property
     def time(self) -> float:
@@ -76,6 +79,7 @@ class TrackStats:
     pair_offsets: Counter = field(default_factory=Counter)
     ambiguous: Counter = field(default_factory=Counter)
     unknown_ids: Counter = field(default_factory=Counter)  # id -> detections
+    mirrored: Counter = field(default_factory=Counter)  # (camera, id) -> detections dropped as possibly mirrored
     videos: dict[str, VideoHealth] = field(default_factory=dict)  # camera -> its video's health: as of its newest
     # frame (the last carries the health at the video's end), or as track_rig(stats=) keeps it (frames or not)
 
@@ -86,6 +90,7 @@ class TrackStats:
         self.pair_offsets[r.camera] += len(r.offsets)
         self.ambiguous[r.camera] += sum(o.choice == Choice.AMBIGUOUS for o in r.offsets)
         self.unknown_ids.update(r.unknown_ids)
+        self.mirrored.update((r.camera, i) for i in r.mirrored)
         if r.frame.video is not None:
             self.videos[r.camera] = r.frame.video
 
@@ -115,18 +120,20 @@ class CameraTracker:
     geometries: list[PairGeometry] = field(default_factory=list)
     markers: dict[int, Marker] = field(default_factory=dict)
     bodies: BodyGeometry | None = None
+    ambiguous: frozenset[int] = frozenset()  # rig ids a mirror image can read as (tracking.mirror)
 
     def __post_init__(self) -> None:
         self.geometries = pair_geometries(self.rig)
         self.markers = self.rig.marker_by_id
         self.bodies = body_geometry(self.rig)
+        self.ambiguous = mirror_ambiguous(self.rig)
 
     @classmethod
     def from_rig(cls, rig: Rig, entry: CameraEntry, refinement: Refinement, keep_color: bool = False,
                  packets: bool = False, roi_tracking: bool = False) -> CameraTracker:
         """Load the camera's calibration and build its detector (stateful MarkerTracker with roi_tracking)."""
         camera = load_camera(rig.resolve(entry.calibration))
-        detector = MarkerDetector(rig.dictionary, refinement, camera)
+        detector = MarkerDetector(rig.dictionary, refinement, camera, inverted=rig.inverted)
         return cls(rig, entry, camera, MarkerTracker(detector) if roi_tracking else detector, keep_color, packets)
 
     def process(self, frame: Frame) -> FrameResult:
@@ -148,12 +155,14 @@ class CameraTracker:
         """Poses, pair offsets and the body observation of one frame's detections."""
         poses = {d.id: estimate_pose(d, self.camera, self.rig.marker_size) for d in detections.markers
                  if d.id in self.markers}
+        poses, mirrored = drop_mirrored(poses, self.markers, self.ambiguous, self.rig.marker_size, self.camera)
         unknown = [d.id for d in detections.markers if d.id not in self.markers]
         offsets = frame_offsets(self.geometries, poses, self.entry.name, frame.time)
         assert self.bodies is not None
         observation = observe_bodies(self.bodies, poses, self.camera, self.entry.name, frame.time,
                                      self.rig.marker_size)
-        return FrameResult(self.entry.name, frame, detections, poses, offsets, unknown, observation)
+        return FrameResult(self.entry.name, frame, detections, poses, offsets, unknown, observation,
+                           mirrored=tuple(mirrored))
 
     def skip(self, frame: Frame) -> FrameResult:
         """A frame recorded but not searched for markers (the tracker is behind real time)."""
@@ -166,7 +175,7 @@ class CameraTracker:
         path = self.rig.resolve(source)
         src = path if path.exists() or not source.startswith(("rtsp:", "http:", "https:")) else source
         health = health if health is not None else VideoHealth()
-        for frame in to_the_end(frames(src, self.entry.time_offset, keep_color=self.keep_color,
+        for frame in to_the_end(frames(src, self.rig.clock(self.entry), keep_color=self.keep_color,
                                        packets=self.packets, health=health), health):
             yield self.process(frame)
 

@@ -30,7 +30,7 @@ place it is not applied, and is reported (tracking.estimator, `topside check`).
 from __future__ import annotations
 
 import re
-from functools import cached_property
+from functools import cached_property, lru_cache
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -40,6 +40,7 @@ import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from tracking.errors import InputError, read_yaml
+from tracking.frame_times import FrameClock, read_frame_times
 from tracking.geometry import nearest_rotation, quaternion_rotation, transform
 from tracking.outputs import write_text
 
@@ -58,7 +59,8 @@ def _number(value: Any) -> Any:
 
 
 Body = Literal["jacket", "topside"]
-Mount = Literal["fixed", "vessel", "drone"]  # on the jacket or a platform; on the crane vessel (waves); flying
+Mount = Literal["fixed", "vessel", "drone", "moving"]  # on the jacket or a platform; on the crane vessel (waves);
+# flying; moving briskly against the jacket (a boom, a hand-held camera, or a jacket marker group carried by hand)
 DEFAULT_MOUNT: Mount = "drone"  # the loosest motion prior: what a camera without `mount` gets
 Coordinate = Annotated[float, BeforeValidator(_number), Field(ge=-MAX_COORDINATE_M, le=MAX_COORDINATE_M)]
 Vec3 = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
@@ -254,6 +256,8 @@ class CameraEntry(_Model):
     position_sigma: Annotated[Number | None, Field(gt=0, le=MAX_POSITION_SIGMA_M)] = None
     # σ of time_offset against the other cameras' clocks, s (`topside sync` writes it; unset: unknown, taken as exact)
     time_offset_sigma: Annotated[Number | None, Field(ge=0, le=MAX_TIME_SIGMA_S)] = None
+    times: str | None = Field(default=None, min_length=1)  # CSV of each frame's capture time (tracking.frame_times):
+    # used instead of the video's presentation times; time_offset is still added
 
     @model_validator(mode="after")
     def _survey_complete(self) -> CameraEntry:
@@ -262,6 +266,12 @@ class CameraEntry(_Model):
         if self.position is None and self.position_sigma is not None:
             raise ValueError("position: missing (expected the surveyed [x, y, z] in the jacket frame with "
                              "position_sigma)")
+        return self
+
+    @model_validator(mode="after")
+    def _times_of_a_file(self) -> CameraEntry:
+        if self.times is not None and (self.source.isdigit() or "://" in self.source):
+            raise ValueError("times: a times file goes with a video file (expected no times for a device or stream)")
         return self
 
     @field_validator("source", mode="before")
@@ -280,6 +290,7 @@ class Rig(_Model):
 
     name: str = "installation"
     dictionary: str = "DICT_6X6_250"
+    inverted: bool = False  # the markers are printed white on black
     marker_size: Annotated[float, BeforeValidator(_number), Field(gt=0, le=MAX_MARKER_SIZE_M)]  # black square, m
     cones: dict[str, Vec3] = Field(default_factory=dict)  # cone tip on the jacket, jacket frame, m
     markers: list[Marker]
@@ -377,6 +388,10 @@ class Rig(_Model):
             T[:3, 3] = R_jacket_W.T @ np.array(pair.mated)
         return T
 
+    def clock(self, entry: CameraEntry) -> FrameClock:
+        """A camera's clock: its time_offset, and the capture times of its times file when it names one."""
+        return FrameClock(entry.time_offset, _frame_times(self.resolve(entry.times)) if entry.times else None)
+
     def resolve(self, relative: str) -> Path:
         """A path from the rig file, relative to the rig file's folder."""
         p = Path(relative)
@@ -459,7 +474,18 @@ def load_rig(path: str | Path) -> Rig:
         if err["type"] == "literal_error":
             msg = f"got {err['input']!r}; {msg[0].lower()}{msg[1:]}"
         raise InputError(path, msg, loc or None) from None
-    return rig.model_copy(update={"path": path, "warnings": rig_warnings(path, rig)})
+    rig = rig.model_copy(update={"path": path, "warnings": rig_warnings(path, rig)})
+    for entry in rig.cameras:  # a times file that cannot be read is named now, before any work
+        rig.clock(entry)
+    return rig
+
+
+@lru_cache(maxsize=32)
+def _frame_times(path: Path) -> np.ndarray:
+    """A times file's capture times by frame number, read once per process (read-only)."""
+    times = read_frame_times(path)
+    times.flags.writeable = False
+    return times
 
 
 def save_rig(path: str | Path, rig: Rig) -> None:

@@ -25,11 +25,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 EVIDENCE_TAU_S = 0.5  # s: a view's corner errors stay about this long (estimator.noise.VIEW_BIAS_TAU_S)
-MIN_SEPARATION_M = 1.0  # markers closer than this give little evidence of scale
+MIN_SEPARATION_SIDES = 1.0  # markers closer than this many marker sides give little evidence of scale
 MAX_OFF_NORMAL_DEG = 60.0  # a marker seen further off its normal measures its distance poorly and with a bias the
 # corner noise does not explain (a drone's marker 77° off read two markers 7 % too far apart at a stated 1.6 %)
 SAMPLE_FLOOR = 0.01  # relative σ of one frame's sample, at least (corner biases the pose covariance leaves out)
-MARKER_SURVEY_M = 0.02  # a marker centre's survey in the rig is good to about this (check.RIG_SURVEY_SIGMA_M)
+MARKER_SURVEY_SIDES = 0.02  # a marker centre's survey in the rig is good to about this share of a marker's side (20 mm
+# for 1 m markers, check.RIG_SURVEY_SIGMA_M; a print's layout holds a board's markers at least as well)
 SCALE_FLOOR = 0.003  # relative σ of the pooled size, at least: corner biases common to a camera's markers
 MISMATCH_SIGMAS = 5.0  # the pooled size is off when it is this many σ from 1 ...
 MIN_MISMATCH = 0.03  # ... and off by this share at least (a print or survey, not a typo, below it)
@@ -56,28 +57,28 @@ def off_normal_deg(T_camera_marker: np.ndarray) -> float:
 
 
 def separation_sample(camera: str, ids: tuple[int, int], T_i: np.ndarray, T_j: np.ndarray, cov_i: np.ndarray,
-                      cov_j: np.ndarray, rig_separation: float) -> ScaleSample | None:
+                      cov_j: np.ndarray, rig_separation: float, marker_size: float = 1.0) -> ScaleSample | None:
     """From two markers of one body in one frame: their poses in the camera (4, 4) with their translations'
-    covariances (3, 3), and their separation in the rig (m); None when they are too close, or one is seen too far off
-    its normal, to tell."""
+    covariances (3, 3), and their separation in the rig (m), markers of marker_size (m); None when they are too close,
+    or one is seen too far off its normal, to tell."""
     seen = T_i[:3, 3] - T_j[:3, 3]
     d = float(np.linalg.norm(seen))
-    if rig_separation < MIN_SEPARATION_M or d <= 0 or max(off_normal_deg(T_i), off_normal_deg(T_j)) > \
-            MAX_OFF_NORMAL_DEG:
+    off = max(off_normal_deg(T_i), off_normal_deg(T_j))
+    if rig_separation < MIN_SEPARATION_SIDES * marker_size or d <= 0 or off > MAX_OFF_NORMAL_DEG:
         return None
     u = seen / d
     rel = np.sqrt(float(u @ (cov_i + cov_j) @ u)) / d
-    sigma = float(np.hypot(max(rel, SAMPLE_FLOOR), np.sqrt(2.0) * MARKER_SURVEY_M / rig_separation))
+    sigma = float(np.hypot(max(rel, SAMPLE_FLOOR), np.sqrt(2.0) * MARKER_SURVEY_SIDES * marker_size / rig_separation))
     return ScaleSample(rig_separation / d, sigma, camera, f"markers {ids[0]} and {ids[1]}", rig_separation, d)
 
 
 def survey_sample(camera: str, marker: int, seen_distance: float, seen_sigma: float, rig_distance: float,
-                  survey_sigma: float) -> ScaleSample | None:
+                  survey_sigma: float, marker_size: float = 1.0) -> ScaleSample | None:
     """From a surveyed camera's distance to a jacket marker: measured (with its σ, m) and from the rig."""
     if seen_distance <= 0 or rig_distance <= 0:
         return None
     sigma = float(np.hypot(max(seen_sigma / seen_distance, SAMPLE_FLOOR),
-                           np.hypot(survey_sigma, MARKER_SURVEY_M) / rig_distance))
+                           np.hypot(survey_sigma, MARKER_SURVEY_SIDES * marker_size) / rig_distance))
     return ScaleSample(rig_distance / seen_distance, sigma, camera, f"its surveyed position (marker {marker})",
                        rig_distance, seen_distance)
 

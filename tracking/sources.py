@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from tracking.errors import InputError
+from tracking.frame_times import FrameClock
 from tracking.images import Frame, VideoHealth, decoded_frames, frames, open_video, to_the_end
 from tracking.rig import CameraEntry, Rig
 
@@ -162,7 +163,8 @@ def stream_frames(url: str, time_offset: float, clock: Callable[[], float] = tim
                         packet=frame.packet, keyframe=frame.keyframe, video=frame.video)
 
 
-def file_frames(path: Path, time_offset: float, pacer: Pacer, loop_until: float | None = None) -> Iterator[Frame]:
+def file_frames(path: Path, time_offset: float | FrameClock, pacer: Pacer, loop_until: float | None = None
+                ) -> Iterator[Frame]:
     """A video file replayed at its own frame rate (or faster): each frame waits until it is due.
 
     loop_until: replay the file again and again, capture times running on, up to this capture time (soak tests).
@@ -191,7 +193,7 @@ def camera_frames(rig: Rig, entry: CameraEntry, pacer: Pacer, loop_until: float 
         return device_frames(int(entry.source), entry.time_offset)
     if kind == SourceKind.STREAM:
         return stream_frames(entry.source, entry.time_offset)
-    return file_frames(rig.resolve(entry.source), entry.time_offset, pacer, loop_until)
+    return file_frames(rig.resolve(entry.source), rig.clock(entry), pacer, loop_until)
 
 
 def first_capture_time(rig: Rig, entry: CameraEntry) -> float | None:
@@ -199,7 +201,7 @@ def first_capture_time(rig: Rig, entry: CameraEntry) -> float | None:
     if source_kind(entry.source) != SourceKind.FILE:
         return None
     try:
-        return next(iter(frames(rig.resolve(entry.source), entry.time_offset))).time
+        return next(iter(frames(rig.resolve(entry.source), rig.clock(entry)))).time
     except (InputError, StopIteration):
         return None
 

@@ -216,3 +216,39 @@ def test_input_errors_cross_processes() -> None:
     for err in (InputError("rig.yaml", "bad (expected good)", "cameras[0].source"), InputError("a.mp4", "damaged")):
         back = pickle.loads(pickle.dumps(err))
         assert (back.source, back.message, back.field, str(back)) == (err.source, err.message, err.field, str(err))
+
+
+def test_a_times_file_stamps_every_frame_in_chunks_as_in_one_pass(clip: Path, tmp_path: Path) -> None:
+    """Cameras with times files (jittered capture times, one frame unlisted): one pass and chunks at keyframes give
+    every frame the file's time plus the camera's time_offset, and both drop the unlisted frame and say so."""
+    import yaml
+
+    rig_data = yaml.safe_load((clip / "rig.yaml").read_text())
+    rng = np.random.default_rng(7)
+    sidecar: dict[str, np.ndarray] = {}
+    for cam in rig_data["cameras"]:
+        n = sum(1 for r in track_rig(load_rig(clip / "rig.yaml"), cameras=[cam["name"]]))
+        times = 50.0 + np.cumsum(rng.uniform(0.04, 0.09, n))  # not the nominal 1/15 s
+        frames = np.arange(n)
+        keep = frames != 30  # frame 30 unlisted
+        path = tmp_path / f"{cam['name']}.times.csv"
+        pd_frame = np.column_stack([frames[keep], times[keep]])
+        path.write_text("frame,time\n" + "".join(f"{int(f)},{t:.6f}\n" for f, t in pd_frame))
+        cam["times"], cam["time_offset"] = str(path), 0.25
+        cam["calibration"] = str(clip / cam["calibration"])
+        cam["source"] = str(clip / cam["source"])
+        sidecar[cam["name"]] = np.where(keep, times + 0.25, np.nan)
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(rig_data))
+    rig = load_rig(tmp_path / "rig.yaml")
+    one_stats, chunk_stats = TrackStats(), TrackStats()
+    one_pass = list(track_rig(rig, stats=one_stats))
+    chunked = list(track_chunks(rig, InPlace(), stats=chunk_stats, chunk_frames=CHUNK))
+    for run in (one_pass, chunked):
+        got = {(r.camera, r.frame.index): r.time for r in run}
+        assert all(np.isclose(t, sidecar[c][i]) for (c, i), t in got.items())
+        assert not any(i == 30 for _, i in got)
+        assert len(got) == sum(np.isfinite(t).sum() for t in sidecar.values())
+    assert [r.time for r in one_pass] == [r.time for r in chunked]
+    for stats in (one_stats, chunk_stats):
+        assert all(v.unlisted == 1 for v in stats.videos.values())
+        assert all("without a time in the times file" in line for line in stats.warnings())

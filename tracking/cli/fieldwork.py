@@ -98,6 +98,8 @@ def detect(
                                                       callback=finite(0.0, high=MAX_MARKER_SIZE_M))] = None,
     refine: RefineOption = DEFAULT_REFINEMENT,
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per frame.")] = False,
+    inverted: Annotated[bool, typer.Option("--inverted", help="Markers printed white on black (a rig says so "
+                                                              "itself: inverted: true).")] = False,
 ) -> None:
     """Print the markers found in every frame: ids, corners (TL TR BR BL) and, given a camera, poses."""
     from tracking.camera import load_camera
@@ -111,7 +113,8 @@ def detect(
     if dictionary and the_rig and dictionary != the_rig.dictionary:
         raise InputError("--dictionary", f"{dictionary} differs from the rig's {the_rig.dictionary}")
     cam = load_camera(camera) if camera else None
-    detector = MarkerDetector(dictionary or (the_rig.dictionary if the_rig else "DICT_6X6_250"), refine, cam)
+    detector = MarkerDetector(dictionary or (the_rig.dictionary if the_rig else "DICT_6X6_250"), refine, cam,
+                              inverted=inverted or bool(the_rig and the_rig.inverted))
     size = marker_size or (the_rig.marker_size if the_rig else 1.0)
     unknown: Counter[int] = Counter()  # ids not in the rig: detections
     n_frames = 0

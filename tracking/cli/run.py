@@ -221,6 +221,10 @@ def _print_track_summary(rig: Rig, rig_path: Path, mode: Mode, stats: TrackStats
     if stats.unknown_ids:
         summary = ", ".join(f"id {i}: {n}" for i, n in sorted(stats.unknown_ids.items()))
         console.print(f"markers not in the rig (ignored): {summary}", style="yellow")
+    if stats.mirrored:
+        summary = ", ".join(f"{cam} id {i}: {n}" for (cam, i), n in sorted(stats.mirrored.items()))
+        console.print(f"markers that may be seen mirrored (from behind, or reflected) and that no other marker of "
+                      f"their body confirmed (dropped): {summary}", style="yellow")
     for line in stats.warnings([c.name for c in rig.cameras]):  # videos cut short, timestamps back or jumping
         err_console.print(f"topside: warning: {line}", style="yellow")
 

@@ -30,15 +30,16 @@ from tracking.estimator.noise import (
     REPORT_WARMUP_SIGMA_M,
     STATE,
     camera_process_noise,
+    fits_its_corners,
     prior_covariance,
     process_noise,
 )
-from tracking.estimator.placement import place_camera, place_topside
+from tracking.estimator.placement import camera_covariance, place_camera, place_topside
 from tracking.estimator.process import Transition, rate_decay
 from tracking.estimator.state import CameraState, FilterState, point_offset_matrix
-from tracking.geometry import numeric_jacobian, pose_params, rotation
+from tracking.geometry import inverse, numeric_jacobian, pose_params, pose_residual, rotation
 from tracking.offsets import BodyObservation
-from tracking.pose import Choice
+from tracking.pose import BodyPose, Choice
 from tracking.scale import ScaleEvidence, below_cones, survey_sample
 
 
@@ -104,6 +105,9 @@ class TopsideFilter(FilterState):
         if cam is None:
             return False
         self._measure_scale(o)
+        cam.corner_noise.add(o.jacket)
+        cam.model_px = o.model_px
+        cam.corner_noise.add(o.topside)
         if cam.T_jacket_camera is None:
             if o.jacket is None:
                 cam.waiting = "no jacket marker of the rig in its view (a camera is placed by the jacket's markers)"
@@ -118,6 +122,11 @@ class TopsideFilter(FilterState):
         topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
         renew(self, [o])  # when predict was not given the frame
         used_jacket = corner_update(self, cam, jacket, o.K, False, o.time)  # the camera first, then the topside
+        if not used_jacket and o.jacket is not None and self._jumped(cam, o.jacket):  # moved beyond its prior:
+            cam.T_jacket_camera = None  # placed again at this view, not refused frame after frame until lost
+            self.reset_camera(cam)
+            if place_camera(self, cam, o):
+                used_jacket = corner_update(self, cam, jacket, o.K, False, o.time)
         used_topside = corner_update(self, cam, topside, o.K, True, o.time)  # through the camera just refined
         if o.jacket is not None:
             self._camera_refused(cam, used_jacket)
@@ -130,6 +139,18 @@ class TopsideFilter(FilterState):
             self.consecutive_rejects = 0
             self.last_accepted[o.camera] = o.time
         return used_topside
+
+    def _jumped(self, cam: CameraState, view: BodyPose) -> bool:
+        """Whether a placed camera moved beyond what its state allows: the pose its jacket view alone gives (unique,
+        fitting its corners) lies outside the state's camera covariance plus its own (χ² over 6 at GATE_CHI2). A
+        rain-struck corner, which refuses the corners, leaves the view's own fit (outliers removed) where the state
+        has the camera; a camera knocked or carried off does not."""
+        if view.choice != Choice.UNIQUE or not fits_its_corners(view, cam.corner_noise.sigma_px):
+            return False
+        d = pose_residual(inverse(view.T_camera_body), self.camera_pose(cam))
+        b = slice(cam.index, cam.index + 6)
+        S = self.P[b, b] + camera_covariance(view.T_camera_body, view.covariance)
+        return float(d @ np.linalg.solve(S, d)) > GATE_CHI2[6]
 
     def _camera_refused(self, cam: CameraState, used: bool) -> None:
         """Count a camera's jacket views refused in a row; at REINIT_AFTER_REJECTS it is lost, placed again later."""
@@ -166,7 +187,7 @@ class TopsideFilter(FilterState):
             p0 = pose_params(T)
             J = numeric_jacobian(distance, p0)
             surveyed = survey_sample(o.camera, i, float(distance(p0)[0]), float(np.sqrt(J @ cov @ J.T)[0, 0]),
-                                   float(np.linalg.norm(position - c)), sigma)
+                                   float(np.linalg.norm(position - c)), sigma, self.rig.marker_size)
             if surveyed is not None:
                 self.scale.add(surveyed, o.time)
 

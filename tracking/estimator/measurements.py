@@ -179,9 +179,9 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
 
 def _corner_covariance(s: FilterState, cam: CameraState, J: np.ndarray, HPH: np.ndarray, y: np.ndarray,
                        topside: bool) -> np.ndarray:
-    """(8, 8) noise of a marker's corners: CORNER_NOISE_PX, a topside seen up to its camera clock's σ early or late,
-    and a corner far off (rain, glare) counted as if at the Huber threshold."""
-    R = CORNER_NOISE_PX**2 * np.eye(8)
+    """(8, 8) noise of a marker's corners: CORNER_NOISE_PX or the camera model's own RMS error, a topside seen up to its
+    camera clock's σ early or late, and a corner far off (rain, glare) counted as if at the Huber threshold."""
+    R = max(CORNER_NOISE_PX, cam.model_px) ** 2 * np.eye(8)
     if topside and s.clock_sigma.get(cam.name):  # a clock known to σ_t: the topside seen up to σ_t early
         moved = J[:, :6] @ s.x[6:12] * s.clock_sigma[cam.name]  # or late, (8,) px along its motion
         R += np.outer(moved, moved)  # (cone_estimates adds what the cameras' clocks share)

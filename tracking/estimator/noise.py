@@ -6,7 +6,8 @@ Evidence for each is in docs/method.md#the-filters-constants. Units: metres, rad
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from statistics import NormalDist
 
 import numpy as np
@@ -29,6 +30,8 @@ SMOOTHER_SPAN_S = 30.0  # recorded runs are smoothed this much at a time, each t
 SMOOTHER_LAG_S = 45.0  # future after it: memory holds both, not the whole run; a still camera gains from the far future
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame (edge-fit corners in fog and rain: 0.1 px median)
 VIEW = 8  # bias states per view (camera, marker): one per corner coordinate
+CORNER_NOISE_SAMPLES = 30  # body fits whose median measures a camera's corner noise (CornerNoise): 2-5 s of frames
+CORNER_NOISE_MIN_SAMPLES = 3  # fewer fits than this measure nothing: CORNER_NOISE_PX until then
 VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that stays while its marker's image stays
 VIEW_BIAS_RENEW_PX = 0.5  # that part renews as the marker's image moves: exp(-travel / this) of it stays from one
 # frame of the view to the next (travel: the mean shift of its predicted corners, the filter's own corrections included)
@@ -82,7 +85,10 @@ class FilterTuning:
         CameraMotion("fixed", 1e-8, 1e-6, 1e-4, 1e-3),  # bolted to the jacket or a platform
         CameraMotion("vessel", 1e-5, 0.1, 0.005, 0.3),  # on the crane vessel: metres and milliradians in waves
         CameraMotion("drone", 1e-3, 0.5, 0.05, 1.0,  # flying: 0.3 m/s and 0.01 rad/s, changing within seconds
-                     adapts=False))
+                     adapts=False),
+        CameraMotion("moving", 10.0, 5.0, 1.0, 1.0),  # brisk: turns of 1 rad/s and 1 m/s changing within a second
+        # (a hand-held board 1 m from a webcam); a ceiling, which its images' motion level lowers (CameraMotionLevel)
+    )
 
     def motion(self, mount: str) -> CameraMotion:
         """The motion prior of a camera mount."""
@@ -120,11 +126,39 @@ def prior_covariance(tuning: FilterTuning) -> np.ndarray:
 
 
 
-def fits_its_corners(pose: BodyPose) -> bool:
-    """Whether a pose's reprojection RMS is what corner noise of CORNER_NOISE_PX leaves at PLACEMENT_FIT_P
-    over the corners its fit kept (Wilson-Hilferty's χ² quantile, within 1 % from 2 degrees of freedom up)."""
+def _chi2_quantile(dof: int, p: float) -> float:
+    """χ² quantile at p over dof degrees of freedom (Wilson-Hilferty, within 1 % from 2 degrees of freedom up)."""
+    z = NormalDist().inv_cdf(p)
+    return dof * (1.0 - 2.0 / (9 * dof) + z * np.sqrt(2.0 / (9 * dof))) ** 3
+
+
+def fits_its_corners(pose: BodyPose, sigma_px: float = CORNER_NOISE_PX) -> bool:
+    """Whether a pose's reprojection RMS is what corner noise of sigma_px leaves at PLACEMENT_FIT_P over the corners
+    its fit kept."""
     points = 8 * len(pose.marker_ids) - 2 * pose.outliers  # coordinates of the corners the fit kept
-    dof = points - 6
-    z = NormalDist().inv_cdf(PLACEMENT_FIT_P)
-    quantile = dof * (1.0 - 2.0 / (9 * dof) + z * np.sqrt(2.0 / (9 * dof))) ** 3
-    return pose.reprojection_error**2 * points <= quantile * CORNER_NOISE_PX**2
+    return pose.reprojection_error**2 * points <= _chi2_quantile(points - 6, PLACEMENT_FIT_P) * sigma_px**2
+
+
+@dataclass
+class CornerNoise:
+    """A camera's corner noise, measured from the residuals of its body-pose fits (views of two markers or more): a
+    fit's RMS² × its corner coordinates over the median χ² of its degrees of freedom estimates σ²; the camera's σ is
+    the median of the last CORNER_NOISE_SAMPLES (robust to a frame a raindrop struck), never below CORNER_NOISE_PX.
+    A real camera's compression, rolling shutter and calibration leave more than a render does (four webcams at
+    1280×720: 0.2-0.3 px RMS), and a gate or a weight at CORNER_NOISE_PX would refuse or over-trust them."""
+
+    samples: deque = field(default_factory=lambda: deque(maxlen=CORNER_NOISE_SAMPLES))  # σ² estimates, px²
+
+    def add(self, pose: BodyPose | None) -> None:
+        """One body-pose fit's residuals (a lone marker's fit, 2 degrees of freedom, tells too little)."""
+        if pose is None or len(pose.marker_ids) < 2:
+            return
+        points = 8 * len(pose.marker_ids) - 2 * pose.outliers
+        self.samples.append(pose.reprojection_error**2 * points / _chi2_quantile(points - 6, 0.5))
+
+    @property
+    def sigma_px(self) -> float:
+        """The camera's corner σ, px."""
+        if len(self.samples) < CORNER_NOISE_MIN_SAMPLES:
+            return CORNER_NOISE_PX
+        return max(CORNER_NOISE_PX, float(np.sqrt(np.median(self.samples))))

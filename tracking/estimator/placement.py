@@ -46,7 +46,7 @@ def place_camera(s: FilterState, cam: CameraState, o: BodyObservation) -> bool:
     """First view of the jacket: the camera's pose from it; an ambiguous one settled by the evidence."""
     jb = o.jacket
     assert jb is not None
-    if not fits_its_corners(jb):
+    if not fits_its_corners(jb, cam.corner_noise.sigma_px):
         cam.waiting = "its jacket view does not fit its corners (a corner off by rain or glare?)"
         return False  # a corner off: wait for a clean view
     options = [(jb.T_camera_body, jb.covariance), *jb.alternatives]
@@ -208,7 +208,7 @@ def apply_survey(s: FilterState, cam: CameraState, placed: np.ndarray) -> None:
 
 def place_topside(s: FilterState, cam: CameraState, topside: BodyPose) -> bool:
     """First view of the topside: its pose from the placed camera (the option hanging nearest level)."""
-    if not fits_its_corners(topside):
+    if not fits_its_corners(topside, cam.corner_noise.sigma_px):
         return False
     T_jc = s.camera_pose(cam)
     poses = [T_jc @ T for T in [topside.T_camera_body, *(a for a, _ in topside.alternatives)]]

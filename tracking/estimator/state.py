@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tracking.estimator.hypotheses import Hypotheses
-from tracking.estimator.noise import STATE, VIEW, VIEW_BIAS_PX, FilterTuning, prior_covariance
+from tracking.estimator.noise import STATE, VIEW, VIEW_BIAS_PX, CornerNoise, FilterTuning, prior_covariance
 from tracking.estimator.process import CameraMotionLevel
 from tracking.geometry import rotation, skew
 from tracking.offsets import body_geometry
@@ -51,6 +51,8 @@ class CameraState:
     T_jacket_camera: np.ndarray | None = None  # (4, 4), None until a jacket view places the camera
     consecutive_rejects: int = 0
     motion: CameraMotionLevel = field(default_factory=lambda: CameraMotionLevel())
+    corner_noise: CornerNoise = field(default_factory=lambda: CornerNoise())  # its corners' σ, measured
+    model_px: float = 0.0  # its calibration's RMS reprojection error, px (BodyObservation.model_px)
     motion_scale: float = 1.0  # share of its mount's process noise the camera gets (1 until its level is known)
     hypotheses: Hypotheses | None = None  # while an ambiguous jacket view waits: its options and their evidence
     waiting: str = "no frame of it yet"  # why it is not placed (empty once placed)

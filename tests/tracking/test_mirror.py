@@ -1,0 +1,95 @@
+"""Markers seen mirrored (from behind, or reflected) never reach the poses; white-on-black prints are found and fitted
+(tracking.mirror, tracking.detection with inverted=True), on rendered markers whose truth is exact."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from tests.synthetic import PlacedMarker, render, true_corners
+from tracking.camera import CameraModel
+from tracking.detection import MarkerDetector
+from tracking.mirror import drop_mirrored, mirror_ambiguous
+from tracking.pose import estimate_pose
+from tracking.rig import Marker, Rig
+
+K = np.array([[800.0, 0.0, 640.0], [0.0, 800.0, 360.0], [0.0, 0.0, 1.0]])
+DIST = np.zeros(5)
+SIZE = (1280, 720)
+SIDE = 0.0405  # the caliscope board's markers, m
+DICT = cv2.aruco.DICT_4X4_1000
+
+
+def board_rig(ids: tuple[int, ...] = (5, 8), dictionary: str = "DICT_4X4_1000") -> Rig:
+    """Jacket markers on one face, 6 cm apart, and one topside marker above them."""
+    markers = [Marker(id=i, body="jacket", cone="A", face="astern", center=[0.06 * k, 0.0, 0.0])
+               for k, i in enumerate(ids)]
+    markers.append(Marker(id=0, body="topside", cone="A", face="astern", center=[0.0, 0.0, 0.1]))
+    return Rig(dictionary=dictionary, marker_size=SIDE, markers=markers)
+
+
+def placements(rig: Rig, distance: float = 0.6) -> list[PlacedMarker]:
+    """The rig's jacket markers square on to the camera at distance."""
+    R_body_marker = rig.markers[0].T_body_marker[:3, :3]
+    T_camera_body = np.eye(4)
+    T_camera_body[:3, :3] = np.diag([1.0, -1.0, -1.0]) @ R_body_marker.T  # the face looks at the camera
+    T_camera_body[:3, 3] = [0.0, 0.0, distance]
+    out = []
+    for m in rig.markers:
+        if m.body != "jacket":
+            continue
+        out.append(PlacedMarker(m.id, T_camera_body @ m.T_body_marker, SIDE))
+    return out
+
+
+def mirrored(image: np.ndarray, m: PlacedMarker) -> np.ndarray:
+    """The image with a square-on marker's plate flipped left to right in place: its reflection (or its back, printed
+    through), at the same place."""
+    corners = true_corners(K, DIST, m)
+    (x0, y0), (x1, y1) = np.floor(corners.min(axis=0)).astype(int) - 6, np.ceil(corners.max(axis=0)).astype(int) + 6
+    out = image.copy()
+    out[y0:y1, x0:x1] = image[y0:y1, x0:x1][:, ::-1]
+    return out
+
+
+def poses_of(rig: Rig, image: np.ndarray) -> dict:
+    camera = CameraModel(K, DIST, *SIZE)
+    found = MarkerDetector(rig.dictionary, camera=camera).detect(image)
+    return {d.id: estimate_pose(d, camera, SIDE) for d in found.markers}
+
+
+def test_the_ids_a_mirror_can_read_come_from_the_dictionary_and_the_rig() -> None:
+    assert mirror_ambiguous(board_rig((5, 8, 9))) == {8, 9}  # in DICT_4X4_1000, 8 and 9 are their own mirror images
+    assert mirror_ambiguous(board_rig((5, 6, 7))) == frozenset()  # 0's mirror reads as 871, not on the board
+    assert mirror_ambiguous(board_rig(tuple(range(1, 40)), "DICT_6X6_250")) == frozenset()  # the offshore default
+
+
+def test_a_mirrored_marker_is_dropped_and_a_true_one_kept() -> None:
+    rig = board_rig()
+    ambiguous = mirror_ambiguous(rig)
+    camera = CameraModel(K, DIST, *SIZE)
+    true = poses_of(rig, render(K, DIST, SIZE, placements(rig), DICT))
+    assert set(true) == {5, 8}
+    kept, dropped = drop_mirrored(true, rig.marker_by_id, ambiguous, SIDE, camera)
+    assert set(kept) == {5, 8} and dropped == []  # marker 5 puts 8 where it is seen
+    placed = placements(rig)
+    mirror = poses_of(rig, mirrored(render(K, DIST, SIZE, placed, DICT), placed[1]))
+    assert set(mirror) == {5, 8}  # the mirror image of 8 reads as 8: the bits cannot tell
+    kept, dropped = drop_mirrored(mirror, rig.marker_by_id, ambiguous, SIDE, camera)
+    assert set(kept) == {5} and dropped == [8]
+    alone = {8: mirror[8]}  # nothing unambiguous of its body to confirm it
+    assert drop_mirrored(alone, rig.marker_by_id, ambiguous, SIDE, camera) == ({}, [8])
+
+
+@pytest.mark.parametrize("distance", [0.6, 1.4])
+def test_white_on_black_markers_are_found_and_fitted(distance: float) -> None:
+    rig = board_rig((5, 6))
+    placed = placements(rig, distance=distance)
+    image = cv2.bitwise_not(render(K, DIST, SIZE, placed, DICT))  # the negative: white markers on black
+    camera = CameraModel(K, DIST, *SIZE)
+    assert not MarkerDetector(rig.dictionary, camera=camera).detect(image).markers
+    found = MarkerDetector(rig.dictionary, camera=camera, inverted=True).detect(image).markers
+    assert [d.id for d in found] == [5, 6]
+    for d, m in zip(found, placed, strict=True):
+        assert np.abs(d.corners - true_corners(K, DIST, m)).max() < 0.1  # px: the edge fit on the negative

@@ -1,0 +1,83 @@
+"""Mirrored markers: a detection that may be another marker seen from behind or in a reflection.
+
+A marker seen from behind (a print that shows through, a board printed on both sides) or in a mirror (wet steel,
+water, a window) shows its pattern mirrored. OpenCV orders a candidate's corners clockwise before it reads the bits,
+so a mirrored pattern is read like any other: as an id of the dictionary when it is close enough to one, with corners
+that are not that marker's. The bits cannot tell: the mirror image of marker i is then marker j's pattern (in
+DICT_4X4_1000, markers 8 and 9 are their own mirror images). Which ids can be read from a mirror is known before any
+frame, from the dictionary and the rig: id j is mirror-ambiguous when the mirror image of some rig marker's pattern
+reads as j (in any of its four turns, within the detector's error correction rate).
+
+A mirror-ambiguous detection is kept only where an unambiguous marker of its body in the same frame puts it: its
+corners within MIRROR_TOLERANCE of a marker side of where that marker's pose (either IPPE solution) and the rig
+predict them. Otherwise it is dropped and counted: a marker seen from behind never reaches the poses or the filter.
+A rig whose ids have no mirror among them (DICT_6X6_250 below id 250 has none) is not affected at all.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import cv2
+import numpy as np
+
+from tracking.camera import CameraModel
+from tracking.pose import MarkerPose, marker_object_points
+from tracking.rig import Marker, Rig
+
+MIRROR_TOLERANCE = 0.3  # mean corner distance, in marker sides, within which a prediction confirms a detection: a
+# mirrored reading's corners are a side or more from their places (its corner order is mirrored, or it sits at
+# another marker's place); a single marker's pose predicts a neighbour on its body within a few percent of a side
+
+
+def mirror_ambiguous(rig: Rig, correction_rate: float | None = None) -> frozenset[int]:
+    """Rig ids that the mirror image of some rig marker reads as (correction_rate: the detector's, OpenCV's default
+    when None)."""
+    dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, rig.dictionary))
+    rate = cv2.aruco.DetectorParameters().errorCorrectionRate if correction_rate is None else correction_rate
+    ids = {m.id for m in rig.markers}
+    out = set()
+    for i in sorted(ids):
+        bits = cv2.aruco.Dictionary.getBitsFromByteList(dictionary.bytesList[i:i + 1], dictionary.markerSize)
+        found, j, _ = dictionary.identify(np.ascontiguousarray(bits[:, ::-1]), rate)
+        if found and j in ids:
+            out.add(int(j))
+    return frozenset(out)
+
+
+def _predicted_corners(anchor: MarkerPose, T_body_anchor: np.ndarray, T_body_marker: np.ndarray, size: float,
+                       camera: CameraModel) -> list[np.ndarray]:
+    """(4, 2) distorted pixels of a marker's corners as each IPPE solution of an anchor marker on its body puts them."""
+    obj = marker_object_points(size)
+    out = []
+    for s in anchor.solutions:
+        T = s.T_camera_marker @ np.linalg.inv(T_body_anchor) @ T_body_marker
+        px, _ = cv2.projectPoints(obj, cv2.Rodrigues(T[:3, :3])[0], T[:3, 3], camera.K, camera.dist)
+        out.append(px.reshape(4, 2))
+    return out
+
+
+def confirmed(pose: MarkerPose, poses: Mapping[int, MarkerPose], markers: Mapping[int, Marker],
+              ambiguous: frozenset[int], size: float, camera: CameraModel) -> bool:
+    """Whether an unambiguous marker of the same body in the frame puts a mirror-ambiguous marker where it was seen."""
+    corners = np.asarray(pose.corners, dtype=float)
+    side = float(np.mean(np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)))
+    body = markers[pose.id].body
+    for k, anchor in poses.items():
+        if k in ambiguous or markers[k].body != body:
+            continue
+        for predicted in _predicted_corners(anchor, markers[k].T_body_marker, markers[pose.id].T_body_marker, size,
+                                            camera):
+            if np.mean(np.linalg.norm(predicted - corners, axis=1)) < MIRROR_TOLERANCE * side:
+                return True
+    return False
+
+
+def drop_mirrored(poses: dict[int, MarkerPose], markers: Mapping[int, Marker], ambiguous: frozenset[int],
+                  size: float, camera: CameraModel) -> tuple[dict[int, MarkerPose], list[int]]:
+    """The frame's poses without the mirror-ambiguous ones nothing confirms, and the ids dropped."""
+    if not ambiguous or not ambiguous & poses.keys():
+        return poses, []
+    dropped = [i for i in sorted(ambiguous & poses.keys())
+               if not confirmed(poses[i], poses, markers, ambiguous, size, camera)]
+    return {i: p for i, p in poses.items() if i not in dropped}, dropped
