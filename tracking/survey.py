@@ -35,7 +35,7 @@ from scipy.sparse import csr_matrix
 from tracking.clocks import SPLINE_MARGIN_S, UNKNOWN_SIGMA_S
 from tracking.errors import InputError
 from tracking.estimator.noise import CORNER_NOISE_PX, VIEW_BIAS_PX
-from tracking.geometry import skews
+from tracking.geometry import rotations
 from tracking.least_squares import SoftL1, Triplets, information_columns, minimise
 from tracking.motion_model import (
     KNOT_S,
@@ -108,15 +108,7 @@ class SurveyFit:
     iterations: int
 
 
-def rodrigues(v: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) rotation matrices of rotation vectors (N, 3) (series below 1e-8 rad)."""
-    theta = np.linalg.norm(v, axis=1)
-    small = theta < 1e-8
-    t = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - theta**2 / 6, np.sin(t) / t)
-    b = np.where(small, 0.5 - theta**2 / 24, (1 - np.cos(t)) / t**2)
-    K = skews(v)
-    return np.eye(3)[None] + a[:, None, None] * K + b[:, None, None] * (K @ K)
+rodrigues = rotations  # (N, 3, 3) rotation matrices of rotation vectors (N, 3): the name the survey's callers know
 
 
 @dataclass
@@ -247,11 +239,11 @@ class _Bundle:
     def project(self, q: np.ndarray) -> np.ndarray:
         """(V, 8) predicted corners from local parameters q (V, 18)."""
         m = self.v.marker
-        X = np.einsum("nij,kj->nki", rodrigues(q[:, 12:15]) @ self.R_nom[m], self.obj)
+        X = np.einsum("nij,kj->nki", rotations(q[:, 12:15]) @ self.R_nom[m], self.obj)
         X = X + (self.c_nom[m] + q[:, 15:18])[:, None, :]
-        X = np.einsum("nij,nkj->nki", rodrigues(q[:, 6:9]), X) + q[:, None, 9:12]  # zero pose for jacket markers
+        X = np.einsum("nij,nkj->nki", rotations(q[:, 6:9]), X) + q[:, None, 9:12]  # zero pose for jacket markers
         T0 = self.v.T_camera_jacket[self.v.frame]
-        X = np.einsum("nij,nkj->nki", rodrigues(q[:, :3]) @ T0[:, :3, :3], X) + (T0[:, :3, 3] + q[:, 3:6])[:, None]
+        X = np.einsum("nij,nkj->nki", rotations(q[:, :3]) @ T0[:, :3, :3], X) + (T0[:, :3, 3] + q[:, 3:6])[:, None]
         K = self.v.K
         u = K[:, None, 0] * X[:, :, 0] / X[:, :, 2] + K[:, None, 2]
         w = K[:, None, 1] * X[:, :, 1] / X[:, :, 2] + K[:, None, 3]
@@ -426,7 +418,7 @@ def surveyed_rig(rig: Rig, fit: SurveyFit) -> Rig:
         if s is None or s.reference or (not np.any(s.position_m) and not np.any(s.rotation_rad)):
             markers.append(m)
             continue
-        R = rodrigues(s.rotation_rad[None])[0] @ m.R_body_marker
+        R = rotations(s.rotation_rad[None])[0] @ m.R_body_marker
         markers.append(Marker(
             id=m.id, body=m.body, cone=m.cone, face=m.face, reference=m.reference,
             center=(np.array(m.center) + s.position_m).round(6).tolist(), R=R.round(9).tolist(),
