@@ -15,8 +15,9 @@ two-dimensional subspace; its 'exact' trust region and 'lm' need a dense Jacobia
 sizes on real footage). These problems are ill-conditioned (splines padded beyond their samples held by second
 differences alone, gauges held by weak priors), so LSMR needs tight tolerances and many iterations: on
 tests/tracking/test_clocks.py's moving topside the fit took 8.6 s (LSMR's default tolerances, clocks 0.005 ms from
-this solver's) or 14 s (tolerances 1e-12) against 0.13 s here; on test_survey.py's displaced markers 22 s without
-converging in 100 evaluations (markers 0.07 mm off) or 82 s (tolerances 1e-10) against 0.9 s here. The soft-L1 loss
+this solver's) or 14 s (tolerances 1e-12) against 0.12 s here; on test_survey.py's displaced markers 22 s without
+converging in 100 evaluations (markers 0.07 mm off) or 82 s (tolerances 1e-10) against 0.74 s here (2 shared
+cores). The soft-L1 loss
 is scipy's (ρ(z) = 2 (√(1 + z) - 1) of z = (r / scale)²; the survey's per corner was given to scipy as a callable
 loss), so the solution is the one scipy's converges to.
 """
