@@ -80,7 +80,7 @@ class Triplets:
         self.cols: list[np.ndarray] = []
         self.vals: list[np.ndarray] = []
 
-    def add(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray) -> None:
+    def add(self, rows: np.ndarray | int, cols: np.ndarray | int, vals: np.ndarray) -> None:
         """Entries vals at (rows, cols), each broadcast to vals' shape."""
         vals = np.asarray(vals, dtype=float)
         self.rows.append(np.broadcast_to(rows, vals.shape).reshape(-1))
