@@ -272,7 +272,7 @@ class _Bundle:
         return np.concatenate([M.reshape(-1), accel, angular, x[self.o_v:] / VIEW_BIAS_PX])
 
     def jacobian(self, x: np.ndarray) -> csr_matrix:
-        """Sparse Jacobian of [corner residuals / FIT_NOISE_PX, prior residuals] (signs: of the predictions)."""
+        """d residuals / dx (sparse): the corners by forward differences of each view's 18 local parameters."""
         q = self.local(x)
         base = self.project(q)
         D = np.empty((len(q), 8, 18))
