@@ -28,7 +28,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix, csr_matrix, diags
+from scipy.sparse import coo_matrix, csc_matrix, csr_matrix, diags
 from scipy.sparse.linalg import splu, spsolve
 
 RIDGE = 1e-9  # relative damping always kept in the normal equations: a parameter nothing reaches (a gauge no prior
@@ -99,7 +99,7 @@ class Triplets:
                           shape=(rows, cols)).tocsr()
 
 
-def _ridged(A: csr_matrix, damping: float = 0.0) -> csr_matrix:
+def _ridged(A: csc_matrix, damping: float = 0.0) -> csc_matrix:
     """A + (damping + RIDGE) diag(max(diag A, RIDGE_FLOOR)), as a CSC matrix for the sparse LU."""
     return (A + diags((damping + RIDGE) * np.maximum(A.diagonal(), RIDGE_FLOOR))).tocsc()
 
@@ -107,7 +107,7 @@ def _ridged(A: csr_matrix, damping: float = 0.0) -> csr_matrix:
 def linear_step(J: csr_matrix, r: np.ndarray) -> np.ndarray:
     """The step minimising |J step + r|² (plain squares; the normal equations with the ridge): a linear problem's
     solution from its residuals r at any x."""
-    return spsolve(_ridged((J.T @ J).tocsr()), -(J.T @ r))
+    return spsolve(_ridged((J.T @ J).tocsc()), -(J.T @ r))
 
 
 @dataclass(frozen=True)
@@ -133,8 +133,9 @@ def minimise(residuals: Callable[[np.ndarray], np.ndarray], jacobian: Callable[[
     it = 0
     for it in range(1, max_iterations + 1):
         w = loss.weights(r)
-        Jw = diags(np.sqrt(w)) @ jacobian(x)
-        A = (Jw.T @ Jw).tocsr()
+        J = jacobian(x)  # named, so held until the next: freed at once, sync's 20-step fits ran ~10 % slower
+        Jw = diags(np.sqrt(w)) @ J
+        A = (Jw.T @ Jw).tocsc()
         g = Jw.T @ (np.sqrt(w) * r)
         while True:
             step = splu(_ridged(A, lam)).solve(-g)
@@ -159,7 +160,7 @@ def information_columns(J: csr_matrix, weights: np.ndarray, columns: np.ndarray)
     whitened residuals' σ 1."""
     if not len(columns):
         return np.zeros((J.shape[1], 0))
-    lu = splu(_ridged((J.T @ diags(weights) @ J).tocsr()))
+    lu = splu(_ridged((J.T @ diags(weights) @ J).tocsc()))
     E = np.zeros((J.shape[1], len(columns)))
     E[columns, np.arange(len(columns))] = 1.0
     return lu.solve(E)
