@@ -11,8 +11,9 @@ footage are fitted at once to
   (the clocks must be synchronised first: `topside sync`);
 - every camera frame's pose T_camera_jacket (vessels and drones move; each frame is free);
 
-by the markers' corners (undistorted pixels, σ FIT_NOISE_PX, soft-L1 weights against rain-struck corners), with
-Levenberg-Marquardt steps on the sparse normal equations.
+by the markers' corners (undistorted pixels, σ FIT_NOISE_PX, soft-L1 per corner beyond SOFT_L1_PX against
+rain-struck corners), with tracking/least_squares.py's solver (Levenberg-Marquardt on the sparse normal equations). The
+topside's motion starts from tracking/motion_model.py's fit of the pair offsets.
 
 Gauge: the jacket frame is defined by its markers as surveyed, the topside frame by its own: either one marker per body
 named `reference: true` in the rig (held where the rig has it), or, without one, by every marker's survey prior at once
@@ -29,22 +30,22 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix, csc_matrix, diags
-from scipy.sparse.linalg import splu
+from scipy.sparse import csr_matrix
 
-from tracking.clocks import (
-    KNOT_S,
-    ROTATION_KNOT_S,
-    UNKNOWN_SIGMA_S,
-    Spline,
-    _Model,
-    _samples,
-    cross_matrices,
-    motion_prior,
-    motion_prior_rows,
-)
+from tracking.clocks import SPLINE_MARGIN_S, UNKNOWN_SIGMA_S
 from tracking.errors import InputError
 from tracking.estimator.noise import CORNER_NOISE_PX, VIEW_BIAS_PX
+from tracking.geometry import rotations
+from tracking.least_squares import SoftL1, Triplets, information_columns, minimise
+from tracking.motion_model import (
+    KNOT_S,
+    ROTATION_KNOT_S,
+    OffsetModel,
+    Spline,
+    motion_prior,
+    motion_prior_rows,
+    pair_samples,
+)
 from tracking.offsets import BodyObservation, PairOffset
 from tracking.pose import Choice, marker_object_points
 from tracking.rig import Marker, Pair, Rig, SurveyCorrection, SurveySigma
@@ -58,10 +59,8 @@ FIT_NOISE_PX = CORNER_NOISE_PX * float(np.sqrt(CORRELATED_FRAMES))  # the corner
 # filter's VIEW_BIAS_PX: at 34 m a 1 m marker spans 37 px, so 0.08 px is 0.2 % of its scale, 70 mm of its depth, which
 # no number of frames averages away)
 SOFT_L1_PX = 0.5  # corners further than this from their prediction count linearly (rain, glare)
-MAX_ITERATIONS = 40  # Levenberg-Marquardt steps
-TOLERANCE = 1e-7  # relative decrease of the cost at which it stops
+MAX_ITERATIONS = 40  # Levenberg-Marquardt steps (it stops sooner when the cost no longer falls)
 DIFF_STEP = 1e-6  # rad or m: forward differences of one observation's corners
-RIDGE = 1e-9  # relative damping kept in the normal equations: a gauge no prior fixes stays finite
 DEFAULT_TOLERANCE_SIGMAS = 3.0  # without the rig's survey_tolerance, a correction beyond this many prior σ is flagged
 BISECTIONS = 40  # independent_sigmas' search for its scale, in ratios (to 1e-6 of a factor of up to 1e6)
 MIN_VIEWS = 10  # a marker seen in fewer frames keeps its survey pose
@@ -109,15 +108,7 @@ class SurveyFit:
     iterations: int
 
 
-def rodrigues(v: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) rotation matrices of rotation vectors (N, 3) (series below 1e-8 rad)."""
-    theta = np.linalg.norm(v, axis=1)
-    small = theta < 1e-8
-    t = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - theta**2 / 6, np.sin(t) / t)
-    b = np.where(small, 0.5 - theta**2 / 24, (1 - np.cos(t)) / t**2)
-    K = cross_matrices(v)
-    return np.eye(3)[None] + a[:, None, None] * K + b[:, None, None] * (K @ K)
+rodrigues = rotations  # (N, 3, 3) rotation matrices of rotation vectors (N, 3): the name the survey's callers know
 
 
 @dataclass
@@ -248,19 +239,29 @@ class _Bundle:
     def project(self, q: np.ndarray) -> np.ndarray:
         """(V, 8) predicted corners from local parameters q (V, 18)."""
         m = self.v.marker
-        X = np.einsum("nij,kj->nki", rodrigues(q[:, 12:15]) @ self.R_nom[m], self.obj)
+        X = np.einsum("nij,kj->nki", rotations(q[:, 12:15]) @ self.R_nom[m], self.obj)
         X = X + (self.c_nom[m] + q[:, 15:18])[:, None, :]
-        X = np.einsum("nij,nkj->nki", rodrigues(q[:, 6:9]), X) + q[:, None, 9:12]  # zero pose for jacket markers
+        X = np.einsum("nij,nkj->nki", rotations(q[:, 6:9]), X) + q[:, None, 9:12]  # zero pose for jacket markers
         T0 = self.v.T_camera_jacket[self.v.frame]
-        X = np.einsum("nij,nkj->nki", rodrigues(q[:, :3]) @ T0[:, :3, :3], X) + (T0[:, :3, 3] + q[:, 3:6])[:, None]
+        X = np.einsum("nij,nkj->nki", rotations(q[:, :3]) @ T0[:, :3, :3], X) + (T0[:, :3, 3] + q[:, 3:6])[:, None]
         K = self.v.K
         u = K[:, None, 0] * X[:, :, 0] / X[:, :, 2] + K[:, None, 2]
         w = K[:, None, 1] * X[:, :, 1] / X[:, :, 2] + K[:, None, 3]
         return np.stack([u, w], axis=2).reshape(-1, 8)
 
-    def residuals(self, x: np.ndarray) -> np.ndarray:
+    def corner_errors(self, x: np.ndarray) -> np.ndarray:
         """(V, 8) measured minus predicted corners (each view's bias added), px."""
         return self.v.corners - self.project(self.local(x)) - x[self.o_v:].reshape(-1, 8)[self.view]
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """All residuals whitened, as jacobian differentiates them: predicted minus measured corners over
+        FIT_NOISE_PX (8 V), then the priors."""
+        return np.concatenate([-self.corner_errors(x).reshape(-1) / FIT_NOISE_PX, self.prior_residuals(x)])
+
+    @property
+    def loss(self) -> SoftL1:
+        """Soft-L1 per corner (its u and v together) beyond SOFT_L1_PX; the priors as plain squares."""
+        return SoftL1(SOFT_L1_PX / FIT_NOISE_PX, rows=8 * len(self.v.frame), group=2)
 
     def prior_residuals(self, x: np.ndarray) -> np.ndarray:
         """Whitened priors: marker corrections, the topside's accelerations, the views' biases."""
@@ -270,8 +271,8 @@ class _Bundle:
         accel, angular = motion_prior(P, self.trans.h, W, self.rot.h)
         return np.concatenate([M.reshape(-1), accel, angular, x[self.o_v:] / VIEW_BIAS_PX])
 
-    def jacobian(self, x: np.ndarray) -> csc_matrix:
-        """Sparse Jacobian of [corner residuals / FIT_NOISE_PX, prior residuals] (signs: of the predictions)."""
+    def jacobian(self, x: np.ndarray) -> csr_matrix:
+        """d residuals / dx (sparse): the corners by forward differences of each view's 18 local parameters."""
         q = self.local(x)
         base = self.project(q)
         D = np.empty((len(q), 8, 18))
@@ -282,13 +283,11 @@ class _Bundle:
         D /= FIT_NOISE_PX
         V = len(q)
         rows8 = (8 * np.arange(V))[:, None] + np.arange(8)  # (V, 8)
-        rows, cols, vals = [], [], []
+        J = Triplets()
 
         def add(mask: np.ndarray, col: np.ndarray, d: np.ndarray) -> None:
             """d (v, 8, c): derivatives of the views in mask by columns col (v, c)."""
-            rows.append(np.repeat(rows8[mask][:, :, None], d.shape[2], axis=2).reshape(-1))
-            cols.append(np.repeat(col[:, None, :], 8, axis=1).reshape(-1))
-            vals.append(d.reshape(-1))
+            J.add(rows8[mask][:, :, None], col[:, None, :], d)
 
         every = np.ones(V, bool)
         add(every, 6 * self.v.frame[:, None] + np.arange(6), D[:, :, :6])
@@ -302,72 +301,21 @@ class _Bundle:
         add(free, self.o_m + 6 * self.mslot[free][:, None] + np.arange(6), D[free][:, :, 12:18])
         bias = np.broadcast_to(np.eye(8) / FIT_NOISE_PX, (V, 8, 8))  # each view's bias adds to its predictions
         add(every, self.o_v + 8 * self.view[:, None] + np.arange(8), bias)
-        m0 = 8 * V
-        nm = 6 * len(self.free)
-        rows.append(m0 + np.arange(nm))
-        cols.append(self.o_m + np.arange(nm))
-        vals.append(1.0 / self.priors.reshape(-1))
-        m1 = m0 + nm
-        m1 = motion_prior_rows(rows, cols, vals, m1, ((self.trans, self.o_t), (self.rot, self.o_w)))
-        nv = self.size - self.o_v
-        rows.append(m1 + np.arange(nv))
-        cols.append(self.o_v + np.arange(nv))
-        vals.append(np.full(nv, 1.0 / VIEW_BIAS_PX))
-        m1 += nv
-        return coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(m1, self.size)).tocsc()
-
-    def weighted(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-        """All residuals whitened (corners / FIT_NOISE_PX, priors), their soft-L1 weights, and the robust cost."""
-        r = self.residuals(x) / FIT_NOISE_PX
-        d = np.linalg.norm(r.reshape(-1, 4, 2), axis=2) * FIT_NOISE_PX / SOFT_L1_PX  # per corner, in SOFT_L1_PX
-        w_corner = 1.0 / np.sqrt(1.0 + d**2)
-        cost = float(np.sum(2 * (np.sqrt(1 + d**2) - 1)) * (SOFT_L1_PX / FIT_NOISE_PX) ** 2)
-        prior = self.prior_residuals(x)
-        cost += float(prior @ prior)
-        # the model predicts; the residual is measured minus predicted: the Jacobian of the residual is -J
-        return np.concatenate([-r.reshape(-1), prior]), np.concatenate([np.repeat(w_corner, 2, axis=1).reshape(-1),
-                                                                       np.ones(prior.size)]), cost
+        m = J.diagonal(8 * V, self.o_m, 1.0 / self.priors.reshape(-1))
+        m = motion_prior_rows(J, m, ((self.trans, self.o_t), (self.rot, self.o_w)))
+        m = J.diagonal(m, self.o_v, np.full(self.size - self.o_v, 1.0 / VIEW_BIAS_PX))
+        return J.matrix(m, self.size)
 
     def solve(self) -> tuple[np.ndarray, int]:
-        """Levenberg-Marquardt from the first poses: the parameters and the iterations taken."""
-        x = self.x0.copy()
-        r, w, cost = self.weighted(x)
-        lam = 1e-3
-        it = 0
-        for it in range(1, MAX_ITERATIONS + 1):
-            J = self.jacobian(x)
-            Jw = diags(np.sqrt(w)) @ J
-            A = (Jw.T @ Jw).tocsc()
-            g = Jw.T @ (np.sqrt(w) * r)
-            d = np.maximum(A.diagonal(), 1e-12)
-            while True:
-                step = splu((A + diags((lam + RIDGE) * d)).tocsc()).solve(-g)
-                x_new = x + step
-                r_new, w_new, cost_new = self.weighted(x_new)
-                if cost_new <= cost:
-                    break
-                lam *= 10
-                if lam > 1e8:
-                    return x, it
-            done = cost - cost_new <= TOLERANCE * cost
-            x, r, w, cost = x_new, r_new, w_new, cost_new
-            lam = max(lam / 10, 1e-9)
-            if done:
-                break
-        return x, it
+        """The fit from the first poses: the parameters and the iterations taken."""
+        fit = minimise(self.residuals, self.jacobian, self.x0, self.loss, MAX_ITERATIONS)
+        return fit.x, fit.iterations
 
     def marker_covariance(self, x: np.ndarray) -> np.ndarray:
         """(6 M, 6 M) joint covariance of the free markers' corrections (δθ, δp of each in slot order; weights as at
         x): markers the footage ties together, or that move together unseen (a body's datum), are correlated."""
-        _, w, _ = self.weighted(x)
-        J = diags(np.sqrt(w)) @ self.jacobian(x)
-        A = (J.T @ J).tocsc()
-        lu = splu((A + diags(RIDGE * np.maximum(A.diagonal(), 1e-12))).tocsc())
-        m = 6 * len(self.free)
-        E = np.zeros((self.size, m))
-        E[self.o_m + np.arange(m), np.arange(m)] = 1.0
-        C = lu.solve(E)[self.o_m:self.o_m + m]
+        columns = self.o_m + np.arange(6 * len(self.free))
+        C = information_columns(self.jacobian(x), self.loss.weights(self.residuals(x)), columns)[columns]
         return 0.5 * (C + C.T)
 
 
@@ -398,15 +346,15 @@ def independent_sigmas(covariance: np.ndarray, prior: np.ndarray) -> np.ndarray:
 
 def _initial_motion(rig: Rig, offsets: list[PairOffset], start: float, end: float
                     ) -> tuple[Spline, Spline, np.ndarray, np.ndarray]:
-    """The topside's translation and rotation splines with their knots (n, 3), (m, 3) to start from: the clocks' joint
-    fit of the pair offsets at zero lag (tracking.clocks), or still at the origin without pair offsets."""
-    s = _samples(rig, offsets, [c.name for c in rig.cameras])
+    """The topside's translation and rotation splines with their knots (n, 3), (m, 3) to start from: the motion model's
+    linear fit of the pair offsets at zero lag (tracking.motion_model, on sync's splines), or still at the origin
+    without pair offsets."""
+    s = pair_samples(rig, offsets, [c.name for c in rig.cameras])
     if not len(s.time):
         trans, rot = Spline.spanning(start, end, KNOT_S), Spline.spanning(start, end, ROTATION_KNOT_S)
         return trans, rot, np.zeros((trans.n, 3)), np.zeros((rot.n, 3))
-    model = _Model(s, [], 0)
-    x = model.linear_fit(np.zeros(model.size))
-    return model.p, model.w, x[model.o_p:model.o_w].reshape(-1, 3), x[model.o_w:model.o_b].reshape(-1, 3)
+    model = OffsetModel(s, [], SPLINE_MARGIN_S)
+    return model.p, model.w, *model.knots(model.linear_fit(np.zeros(model.size)))
 
 
 def survey_markers(rig: Rig, measurements: Iterable[PairOffset | BodyObservation]) -> SurveyFit:
@@ -437,7 +385,7 @@ def survey_markers(rig: Rig, measurements: Iterable[PairOffset | BodyObservation
     x, iterations = bundle.solve()
     cov = bundle.marker_covariance(x)
     held = independent_sigmas(cov, np.array(priors).reshape(-1)).reshape(-1, 6)
-    res = bundle.residuals(x)
+    res = bundle.corner_errors(x)
     out = []
     tolerance = rig.survey_tolerance
     for k, m in enumerate(rig.markers):
@@ -470,7 +418,7 @@ def surveyed_rig(rig: Rig, fit: SurveyFit) -> Rig:
         if s is None or s.reference or (not np.any(s.position_m) and not np.any(s.rotation_rad)):
             markers.append(m)
             continue
-        R = rodrigues(s.rotation_rad[None])[0] @ m.R_body_marker
+        R = rotations(s.rotation_rad[None])[0] @ m.R_body_marker
         markers.append(Marker(
             id=m.id, body=m.body, cone=m.cone, face=m.face, reference=m.reference,
             center=(np.array(m.center) + s.position_m).round(6).tolist(), R=R.round(9).tolist(),
