@@ -125,6 +125,7 @@ class TopsideFilter(FilterState):
         if not used_jacket and o.jacket is not None and self._jumped(cam, o.jacket):  # moved beyond its prior:
             cam.T_jacket_camera = None  # placed again at this view, not refused frame after frame until lost
             self.reset_camera(cam)
+            self.replacements += 1
             if place_camera(self, cam, o):
                 used_jacket = corner_update(self, cam, jacket, o.K, False, o.time)
         used_topside = corner_update(self, cam, topside, o.K, True, o.time)  # through the camera just refined
@@ -141,11 +142,13 @@ class TopsideFilter(FilterState):
         return used_topside
 
     def _jumped(self, cam: CameraState, view: BodyPose) -> bool:
-        """Whether a placed camera moved beyond what its state allows: the pose its jacket view alone gives (unique,
-        fitting its corners) lies outside the state's camera covariance plus its own (χ² over 6 at GATE_CHI2). A
-        rain-struck corner, which refuses the corners, leaves the view's own fit (outliers removed) where the state
-        has the camera; a camera knocked or carried off does not."""
-        if view.choice != Choice.UNIQUE or not fits_its_corners(view, cam.corner_noise.sigma_px):
+        """Whether a placed camera moved beyond what its state allows: the pose its jacket view alone gives (two
+        markers or more, unique, fitting its corners) lies outside the state's camera covariance plus its own (χ² over
+        6 at GATE_CHI2). A rain-struck corner, which refuses the corners, leaves the view's own fit (outliers removed)
+        where the state has the camera; a camera knocked or carried off does not. A lone far marker's pose is not
+        trusted to say so: its covariance misses the biases of a view far off its normal."""
+        if len(view.marker_ids) < 2 or view.choice != Choice.UNIQUE or \
+                not fits_its_corners(view, cam.corner_noise.sigma_px):
             return False
         d = pose_residual(inverse(view.T_camera_body), self.camera_pose(cam))
         b = slice(cam.index, cam.index + 6)

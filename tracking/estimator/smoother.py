@@ -32,6 +32,8 @@ class FilterStep:
     F: Transition
     cameras: tuple[str, ...]
     warming: bool  # within REPORT_WARMUP_S of the topside's (last) placement
+    replaced: bool = False  # a camera was placed again in this step (TopsideFilter.replacements): no linear
+    # transition leads into it, so the backward pass starts afresh before it
 
 
 def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: FilterTuning | None = None,
@@ -51,13 +53,15 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
     kf = TopsideFilter(rig, tuning or FilterTuning())
     steps: list[FilterStep] = []
     for group in frames(measurements):
+        replacements = kf.replacements
         F = kf.predict(group[0].time, group)
         x_pred = kf.x.copy()
         for m in group:
             kf.update(m)
         if kf.last_accepted:
             now = group[0].time if kf.time is None else kf.time  # predict set it
-            steps.append(FilterStep(now, x_pred, kf.x.copy(), kf.P.copy(), F, kf.contributing(), kf.warming()))
+            steps.append(FilterStep(now, x_pred, kf.x.copy(), kf.P.copy(), F, kf.contributing(), kf.warming(),
+                                    kf.replacements != replacements))
             if steps[-1].time - steps[0].time >= span_s + lag_s:
                 yield from _smooth_back(kf, steps, steps[-1].time - lag_s)
     yield from _smooth_back(kf, steps, np.inf)
@@ -74,11 +78,14 @@ def _smooth_back(kf: TopsideFilter, steps: list[FilterStep], until: float) -> It
     x_s = nxt.x
     out = [kf.cone_estimates(x_s, nxt.P, nxt.time, nxt.cameras, nxt.warming)] if nxt.time < until else []
     for step in reversed(steps[:-1]):
-        n = step.x.size  # views first seen after this step are independent of it: their states drop out
-        P_pred = nxt.F.covariance(step.P)
-        C = np.linalg.solve(P_pred, nxt.F.apply(step.P)).T  # P Fᵀ P_pred⁻¹ (P_pred symmetric)
-        x_s = step.x + C @ (x_s[:n] - nxt.x_pred)
-        x_s[kf.consider.indices] = 0.0  # considered, not estimated (FilterState.apply)
+        if nxt.replaced:  # a camera's nominal pose jumped within nxt: its errors before and after are not one state
+            x_s = step.x
+        else:
+            n = step.x.size  # views first seen after this step are independent of it: their states drop out
+            P_pred = nxt.F.covariance(step.P)
+            C = np.linalg.solve(P_pred, nxt.F.apply(step.P)).T  # P Fᵀ P_pred⁻¹ (P_pred symmetric)
+            x_s = step.x + C @ (x_s[:n] - nxt.x_pred)
+            x_s[kf.consider.indices] = 0.0  # considered, not estimated (FilterState.apply)
         if step.time < until:
             out.append(kf.cone_estimates(x_s, step.P, step.time, step.cameras, step.warming))
         nxt = step

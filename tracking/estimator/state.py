@@ -136,6 +136,8 @@ class FilterState:
     # first measured
     rejected: int = field(default=0, init=False)  # total gated measurements
     consecutive_rejects: int = field(default=0, init=False)  # of the topside
+    replacements: int = field(default=0, init=False)  # cameras placed again at a view that showed them moved beyond
+    # their prior (TopsideFilter._jumped)
     last_accepted: dict[str, float] = field(init=False)  # camera -> capture time of its last topside view used
     survey_conflicts: dict[str, float] = field(init=False)  # camera -> distance, m, between its surveyed position
     # and where its first view placed it, for a survey beyond SURVEY_GATE_CHI2 (not applied)
