@@ -37,8 +37,9 @@ AXES = ("x", "y", "z")
 
 
 def plain_opencv(rig: Rig) -> tuple[Counter, list[np.ndarray]]:
-    """Per camera, rig markers plain OpenCV finds; and every jacket/topside pair's offset error (3,) in the jacket frame
-    (m) from each marker's own IPPE pose, as the paper's method has it without its filter."""
+    """Per camera, rig markers plain OpenCV finds in the frames the times file lists; and every jacket/topside pair's
+    offset error (3,) in the jacket frame (m) from each marker's own IPPE pose, as the paper's method has it without
+    its filter."""
     from tracking.camera import load_camera
     from tracking.pose import marker_object_points
 
@@ -50,8 +51,11 @@ def plain_opencv(rig: Rig) -> tuple[Counter, list[np.ndarray]]:
     errors: list[np.ndarray] = []
     for entry in rig.cameras:
         camera = load_camera(rig.resolve(entry.calibration))
+        clock = rig.clock(entry)
         with av.open(str(rig.resolve(entry.source))) as video:
-            for frame in video.decode(video=0):
+            for k, frame in enumerate(video.decode(video=0)):
+                if np.isnan(clock.capture(k, 0.0)):
+                    continue  # the frames the tracker drops too (no time in the times file)
                 corners, ids, _ = detector.detectMarkers(frame.to_ndarray(format="gray"))
                 poses = {}
                 for c, i in zip(corners, ids.ravel() if ids is not None else [], strict=True):
@@ -107,6 +111,8 @@ def session(name: str) -> dict:
     rig = load_rig(REAL / name / "rig.yaml")
     stats = TrackStats()
     results = list(track_rig(rig, stats=stats))
+    for r in results:
+        stats.add(r)
     nominal = rig.model_copy(update={"cameras": [c.model_copy(update={"times": None}) for c in rig.cameras]})
     nominal_results = list(track_rig(nominal))
     found, baseline = plain_opencv(rig)
