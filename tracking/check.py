@@ -325,8 +325,8 @@ def camera_placement(results: list[FrameResult], T_jacket_camera: np.ndarray | N
                      ) -> tuple[np.ndarray | None, dict[int, np.ndarray]]:
     """T_jacket_camera (4, 4): the one given (the filter's), else as the camera's own jacket markers place it in its
     median frame with a jacket view; and every marker of that frame in the jacket frame (4, 4 each) as the camera so
-    placed sees it. One far marker places a camera poorly (a stern camera at 34 m: 6 m off in height); the filter
-    does well."""
+    placed sees it. One far marker places a camera poorly (its tilt is barely seen, and the camera swings about it);
+    the filter's pose, from many frames and the other cameras, is far better."""
     views = [r for r in results if r.observation is not None and r.observation.jacket is not None]
     if not views:
         return T_jacket_camera, {}

@@ -11,14 +11,13 @@ rotation ω(t) of the topside, cubic B-splines) and a clock offset per camera (t
 r the topside marker's centre, b a constant per camera and pair (the pair's survey errors and each camera's
 persistent corner errors do not move in time, so they say nothing of clocks), ε a small rotation per camera and pair
 with the jacket marker's survey tilt σ as its prior: a jacket marker turned 1° off its survey turns the pair's offsets
-with it, 350 mm at 20 m, which grows as the topside comes in and, taken as surveyed, read as a lag (clocks 74-158 ms
-off in config2-setdown-realities without it, 19-45 ms with it). What is observable: τ_c is the shift
-that lines a camera's offsets up with the others' along the topside's velocity, so its information is the squared
-velocity over the offsets' variance along it. A still topside gives nothing; a topside moving 0.05 m/s, seen by a
-camera whose offsets scatter by 5 mm, gives 0.1 s per frame, a few milliseconds over a minute. The cameras' own
-motion (a vessel's waves, a drone's hovering) is not used: each camera's pose is measured from its own images, and a
-drone's motion is its own. The shared wave motion of vessel-mounted cameras would tie those to each other even with
-a still topside; it is left out (see the README).
+with it, 350 mm at 20 m, which grows as the topside comes in and, taken as surveyed, reads as a lag. What is
+observable: τ_c is the shift that lines a camera's offsets up with the others' along the topside's velocity, so its
+information is the squared velocity over the offsets' variance along it. A still topside gives nothing; a topside
+moving 0.05 m/s, seen by a camera whose offsets scatter by 5 mm, gives 0.1 s per frame, a few milliseconds over a
+minute. The cameras' own motion (a vessel's waves, a drone's hovering) is not used: each camera's pose is measured
+from its own images, and a drone's motion is its own. The shared wave motion of vessel-mounted cameras would tie
+those to each other even with a still topside; it is left out (see the README).
 
 The model, its splines and priors are tracking/motion_model.py's. A first estimate comes from matching each camera's
 topside track with the reference's (within ±SEARCH_S, their constant difference removed); the joint fit refines it
@@ -48,11 +47,11 @@ TRACK_STEP_S = 0.05  # grid of the matched tracks, s
 SPLINE_MARGIN_S = SEARCH_S + 1.0  # the motion's splines reach this far beyond the samples, s: a clock moved by up to
 # SEARCH_S still samples them, with a knot's support to spare
 UNKNOWN_SIGMA_S = 0.01  # beyond this σ, a camera's offset is not changed: the motion is too small to tell. The
-# issue's target; the stated σ of a far stern camera misses its systematic errors (config1-procedure1-realities:
-# stern4 148 ms off at a stated σ of 17 ms, stern1 84 ms at 16 ms on the run's second half), so no looser bound
+# issue's target, and no looser: a far camera's stated σ misses its systematic errors (evidence in
+# docs/method.md#clocks-and-the-marker-survey-sync-survey)
 MAX_CORRELATION_LAG = 60  # residual autocorrelation summed over at most this many frames (4 s at 15 FPS)
 CLUSTER_S = 20.0  # residuals within blocks this long count as correlated (σ's sandwich): a far camera's depth wanders
-# for tens of seconds as the topside's view changes (at 5 s blocks config1-procedure1's stern1 was 87 ms off at σ 32 ms)
+# for tens of seconds as the topside's view changes
 SOFT_L1_SCALE = 3.0  # whitened residuals beyond this count linearly (rain-struck corners, a wrong IPPE pose)
 MAX_ITERATIONS = 20  # Levenberg-Marquardt steps of the joint fit
 STEP_TOLERANCE_S = 1e-5  # ... until no clock moves by more than this, s (or the cost no longer falls)
@@ -131,8 +130,8 @@ def _camera_velocity(s: Samples, camera: int, grid: np.ndarray, position: bool =
 def first_estimates(s: Samples, cameras: list[str], reference: int) -> dict[int, float]:
     """Each camera's clock offset against the reference by matching their topside tracks (positions from each camera's
     own spline, their constant difference removed: a camera's biases), s; cameras without overlapping motion are left
-    out. Velocities, which differentiate each camera's noise, matched the wrong swing of a slow set-down (first
-    estimates 0.5-1.1 s off, config2-setdown-realities)."""
+    out. Positions, not velocities: velocities differentiate each camera's noise and can match the wrong swing of a
+    slow motion."""
     grid = np.arange(s.time.min(), s.time.max(), TRACK_STEP_S)
     p_ref, in_ref = _camera_velocity(s, reference, grid, position=True)
     out = {}

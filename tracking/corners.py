@@ -13,12 +13,12 @@ over the edges of all markers of a frame.
 
 The area edge reads its black and white levels half a cell inside and outside the edge. Where the optics blur
 over more than about a sixth of a cell, the neighbouring edges (white code cells inside, the plate's edge outside
-a one-cell quiet zone) reach those levels and bias the edge: up to +7 per mille of scale at 2.8 px cells and 1 px
-blur (benchmarks/corner_scale.py). So each fine profile also samples the next cells in and out (1.5 cells from the
-edge); how much brighter an edge's black level reads beside its white code cells than beside its black ones gives
-the share of a neighbour's contrast the blur carries to the levels (the "glow", hence the marker's blur), and each
-level loses that share of its neighbour's contrast (_glow). That takes the bias to within 0.5 per mille wherever
-the blur is under a third of a cell; edges whose cells are under 2.5 px across (seen edge-on) are left alone.
+a one-cell quiet zone) reach those levels and bias the edge: the marker reads too large or too small. So each fine
+profile also samples the next cells in and out (1.5 cells from the edge); how much brighter an edge's black level
+reads beside its white code cells than beside its black ones gives the share of a neighbour's contrast the blur
+carries to the levels (the "glow", hence the marker's blur), and each level loses that share of its neighbour's
+contrast (_glow). That removes most of the bias wherever the blur is under a third of a cell; edges whose cells are
+under 2.5 px across (seen edge-on) are left alone. Figures: docs/method.md#detection-and-corners.
 With blur_model (`--refine blurred`) the fine pass instead fits each profile with a blurred model of the marker's
 cross-section (inner cell, border, quiet cell, beyond), on markers whose cells are 2 to 8 px across (see the
 README).
@@ -39,7 +39,8 @@ import numpy as np
 from tracking.camera import CameraModel
 
 DEFAULT_CELLS = 8  # cells across the black square: markerSize + 2 border cells (DICT_6X6_*)
-ITERATIONS = 2  # one coarse pass, then fine passes re-centred on the previous lines (more do not help)
+ITERATIONS = 2  # one coarse pass, then one fine pass re-centred on its lines (a second helps sharp pictures but not
+# blurred ones: docs/method.md#where-the-remaining-errors-come-from)
 COARSE_REACH = 0.9  # the coarse pass looks this many cells either side of the start edge ...
 COARSE_MAX_PX = 4.0  # ... but never further than this
 MIN_GRADIENT = 3.0  # grey levels per pixel: weakest step the coarse pass accepts

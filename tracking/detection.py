@@ -40,8 +40,8 @@ EDGES_START = Refinement.NONE  # OpenCV refinement that Refinement.EDGES starts 
 DEFAULT_REFINEMENT = Refinement.EDGES  # unbiased: benchmarks/results/corners.md
 RAIN_FILTER_PX = 5  # grey opening that erases bright streaks thinner than this before a second detection pass
 RAIN_STREAK_LEVELS = 25  # a pixel this much brighter than the rain-filtered image is part of a bright streak ...
-RAIN_STREAK_SHARE = 0.003  # ... and a frame with this share of such pixels has rain: the second pass runs (rain 30 %:
-# 2.0-2.4 % of the pixels; no rain, fog or not: 0.01-0.18 %, where the second pass found no marker in 188 frames)
+RAIN_STREAK_SHARE = 0.003  # ... and a frame with this share of such pixels has rain: the second pass runs (rain lights
+# several times this share, fog and noise alone less: docs/method.md#detection-and-corners)
 RAIN_REFINE_MIN_CELL_PX = 6.0  # edge-fit on the opened image only for markers whose cells (and quiet zone) survive it
 SUBPIX_WIN = 3  # px half-window for CORNER_REFINE_SUBPIX; tuned in benchmarks/corners.py
 SUBPIX_MAX_ITER = 50
@@ -154,8 +154,7 @@ def find_quads(detector: cv2.aruco.ArucoDetector, image: np.ndarray
 def destreaked(gray: np.ndarray, opened: np.ndarray) -> np.ndarray:
     """(H, W) frame with its bright streaks (pixels RAIN_STREAK_LEVELS above the grey opening) taken from the opening
     and every other pixel as it was. The whole opening would also erase the rain, but on a noisy edge its minimum then
-    maximum reads the marker smaller: 1.9 ‰ at a contrast of 70 grey levels with noise of 2 (3.2 ‰ at 40), which at
-    4 m between a pair's markers is 8-13 mm of height."""
+    maximum reads the marker smaller, the more so at low contrast (fog): docs/method.md#detection-and-corners."""
     return np.where(cv2.subtract(gray, opened) > RAIN_STREAK_LEVELS, opened, gray)
 
 

@@ -13,13 +13,9 @@ share: minimise Σ ρ(r(x)) over parameters x, r whitened residuals (σ 1) with 
 Why not scipy.optimize.least_squares: with a sparse Jacobian it solves each step iteratively (LSMR in a
 two-dimensional subspace; its 'exact' trust region and 'lm' need a dense Jacobian, gigabytes at sync's and survey's
 sizes on real footage). These problems are ill-conditioned (splines padded beyond their samples held by second
-differences alone, gauges held by weak priors), so LSMR needs tight tolerances and many iterations: on
-tests/tracking/test_clocks.py's moving topside the fit took 8.6 s (LSMR's default tolerances, clocks 0.005 ms from
-this solver's) or 14 s (tolerances 1e-12) against 0.12 s here; on test_survey.py's displaced markers 22 s without
-converging in 100 evaluations (markers 0.07 mm off) or 82 s (tolerances 1e-10) against 0.74 s here (2 shared
-cores). The soft-L1 loss
-is scipy's (ρ(z) = 2 (√(1 + z) - 1) of z = (r / scale)²; the survey's per corner was given to scipy as a callable
-loss), so the solution is the one scipy's converges to.
+differences alone, gauges held by weak priors), so LSMR needs tight tolerances and many iterations: tens of times
+slower on the tests' fits (docs/method.md#clocks-and-the-marker-survey-sync-survey). The soft-L1 loss is scipy's
+(ρ(z) = 2 (√(1 + z) - 1) of z = (r / scale)²), so the solution is the one scipy's converges to.
 """
 
 from __future__ import annotations
@@ -33,15 +29,12 @@ from scipy.sparse.linalg import splu, spsolve
 
 RIDGE = 1e-9  # relative damping always kept in the normal equations: a parameter nothing reaches (a gauge no prior
 # fixes) stays finite instead of making the matrix singular
-RIDGE_FLOOR = 1.0  # ... of its diagonal, or of this where the diagonal is smaller (a parameter nothing informs).
-# Sync's fit used 1, the survey's 1e-12: the same here, as every parameter of both has a diagonal of 16 or more (a
-# spline's end knot, held by the acceleration prior alone) in the tests' fits
+RIDGE_FLOOR = 1.0  # ... of its diagonal, or of this where the diagonal is smaller (a parameter nothing informs);
+# sync's and the survey's parameters all have 16 or more (a spline's end knot, held by the acceleration prior alone)
 FIRST_DAMPING = 1e-3  # Levenberg-Marquardt's λ, relative to the diagonal, when an undamped step raised the cost
 MAX_DAMPING = 1e8  # ... it grows tenfold while steps raise the cost, up to this: then x is where it stops
-MIN_DAMPING = 1e-9  # ... and shrinks tenfold after each kept step; below this it is 0 (Gauss-Newton). Damping the
-# steps from the start (λ 1e-3, then down to 1e-9) held back the gauges' weakly determined directions: the fit of
-# test_clocks.py's tilted jacket marker stopped 0.008 ms and its σ 6 % from the undamped fit's, and the survey took
-# 10-14 iterations where Gauss-Newton takes 5
+MIN_DAMPING = 1e-9  # ... and shrinks tenfold after each kept step; below this it is 0 (Gauss-Newton). Steps are
+# undamped until one raises the cost: damping from the start holds back the gauges' weakly determined directions
 TOLERANCE = 1e-7  # relative fall of the cost at which the fit stops
 
 
@@ -133,7 +126,7 @@ def minimise(residuals: Callable[[np.ndarray], np.ndarray], jacobian: Callable[[
     it = 0
     for it in range(1, max_iterations + 1):
         w = loss.weights(r)
-        J = jacobian(x)  # named, so held until the next: freed at once, sync's 20-step fits ran ~10 % slower
+        J = jacobian(x)  # named, so held until the next step (freeing it at once ran slower)
         Jw = diags(np.sqrt(w)) @ J
         A = (Jw.T @ Jw).tocsc()
         g = Jw.T @ (np.sqrt(w) * r)

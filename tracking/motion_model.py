@@ -35,7 +35,7 @@ from tracking.rig import Rig
 
 KNOT_S = 0.5  # spacing of the topside translation's cubic spline: follows a pendulum swing (14 s) and 8 s waves to
 # well under a millimetre (a cubic's error ~ h⁴ ω⁴ A / 77), while the offsets' noise between knots averages out instead
-# of showing as velocity (at 0.2 s the spline followed the noise: clocks 10 ms off with a stated σ of 1 ms)
+# of showing as velocity (denser knots follow the noise: docs/method.md#clocks-and-the-marker-survey-sync-survey)
 ROTATION_KNOT_S = 1.0  # spacing of its rotation's spline: twist (24 s) and tilt (6.5 s) of a hanging topside
 ROTATION_PRIOR_RAD = 0.01  # σ of the topside's rotation at every knot: only its changes between cones are seen
 ANGULAR_ACCEL_RADPS2 = 1e-3  # σ of the topside's angular acceleration (second differences of its rotation's knots):

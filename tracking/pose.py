@@ -83,7 +83,7 @@ def pose_covariance(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarra
     J = jac[:, :6]
     try:
         return sigma_px**2 * np.linalg.inv(J.T @ J)
-    except np.linalg.LinAlgError:  # a degenerate view: the pseudo-inverse, as before
+    except np.linalg.LinAlgError:  # a degenerate view: the pseudo-inverse
         return sigma_px**2 * np.linalg.pinv(J.T @ J)
 
 

@@ -27,7 +27,7 @@ import numpy as np
 EVIDENCE_TAU_S = 0.5  # s: a view's corner errors stay about this long (estimator.noise.VIEW_BIAS_TAU_S)
 MIN_SEPARATION_SIDES = 1.0  # markers closer than this many marker sides give little evidence of scale
 MAX_OFF_NORMAL_DEG = 60.0  # a marker seen further off its normal measures its distance poorly and with a bias the
-# corner noise does not explain (a drone's marker 77° off read two markers 7 % too far apart at a stated 1.6 %)
+# corner noise does not explain (evidence in docs/method.md#fusion-the-default, the markers' size)
 SAMPLE_FLOOR = 0.01  # relative σ of one frame's sample, at least (corner biases the pose covariance leaves out)
 MARKER_SURVEY_SIDES = 0.02  # a marker centre's survey in the rig is good to about this share of a marker's side (20 mm
 # for 1 m markers, check.RIG_SURVEY_SIGMA_M; a print's layout holds a board's markers at least as well)

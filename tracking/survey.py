@@ -52,8 +52,8 @@ from tracking.rig import Marker, Pair, Rig, SurveyCorrection, SurveySigma
 
 CORRELATED_FRAMES = 15  # a view's corner errors last about this many frames (a second at 15 FPS: the sub-pixel phase
 # of a marker's edges and the stream's coding of a still picture; tracking.estimator's view biases): its frames count
-# as one in this many. Taken as independent, a minute of a camera at 40 m moved the markers it saw by 80-110 mm at a
-# stated σ of 13 mm (config2-procedure5-realities)
+# as one in this many, else a far camera's frames overstate what it tells (evidence in
+# docs/method.md#clocks-and-the-marker-survey-sync-survey)
 FIT_NOISE_PX = CORNER_NOISE_PX * float(np.sqrt(CORRELATED_FRAMES))  # the corners' σ in the fit (CORNER_NOISE_PX:
 # the fusion filter's frame-to-frame σ; each view (camera, marker) also carries a bias per corner coordinate of the
 # filter's VIEW_BIAS_PX: at 34 m a 1 m marker spans 37 px, so 0.08 px is 0.2 % of its scale, 70 mm of its depth, which
@@ -65,8 +65,7 @@ DEFAULT_TOLERANCE_SIGMAS = 3.0  # without the rig's survey_tolerance, a correcti
 BISECTIONS = 40  # independent_sigmas' search for its scale, in ratios (to 1e-6 of a factor of up to 1e6)
 MIN_VIEWS = 10  # a marker seen in fewer frames keeps its survey pose
 MIN_FORESHORTENING = 0.4  # a marker seen more than 66° off its normal is left out: its corners are biased by up to a
-# pixel (config2-procedure5-realities: drone_A's 104 frames of jacket marker 0 at 77°, 16 by 73 px, moved it and its
-# neighbour 50-70 mm the wrong way)
+# pixel there (evidence in docs/method.md#clocks-and-the-marker-survey-sync-survey)
 
 
 @dataclass(frozen=True)
@@ -323,8 +322,8 @@ def independent_sigmas(covariance: np.ndarray, prior: np.ndarray) -> np.ndarray:
     """(n,) σ that, taken as independent (as the fusion filter takes each marker's), still hold the joint covariance
     (n, n): the smallest c (by bisection) for which D = min(prior², c · its diagonal) satisfies D ⪰ covariance, and
     √D. A correction common to a body's markers (no datum) keeps the survey's σ: the footage cannot tell it, and the
-    markers' own σ would shrink it by √(markers) when taken as independent (config2-procedure5-realities with true
-    clocks: 3 % of y within 2σ, 55 mm off at σ 22 mm)."""
+    markers' own σ would shrink it by √(markers) when taken as independent (evidence in
+    docs/method.md#clocks-and-the-marker-survey-sync-survey)."""
     var = np.maximum(np.diag(covariance), 1e-30)
     top = np.maximum(prior**2, var)
 

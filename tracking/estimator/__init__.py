@@ -24,7 +24,7 @@ stays: the sub-pixel phase of its edges, the blur of its own data cells into the
 of a still picture do not change from frame to frame. Each view (camera, marker) therefore has 8 bias states, one
 per corner coordinate, which renew as the marker's image moves (VIEW_BIAS_RENEW_PX). A still camera's view of a
 still jacket marker then tells the filter its pose to the bias's σ, however long it looks, instead of averaging
-a fixed error away as if it were noise (which left a still camera's swing 7σ off, and an offset 48 mm off).
+a fixed error away as if it were noise (evidence in docs/method.md#fusion-the-default).
 
 What the rig states but footage is not trusted to tell widens σ rather than hiding in it. Each marker's survey
 error (survey_sigma) is a consider state (ConsiderStates): never estimated, its prior kept, its cross-covariance

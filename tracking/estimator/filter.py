@@ -196,8 +196,8 @@ class TopsideFilter(FilterState):
 
     def clock_bound(self, cameras: tuple[str, ...]) -> float:
         """σ, s, of the time an estimate resting on these cameras (all when none) is the topside's: the largest of their
-        clocks' (rig: time_offset_sigma), a bound whatever their weights and signs. Weighing each camera by its share
-        of the topside's information instead left errors outside 2σ where a synced drone's share was large."""
+        clocks' (rig: time_offset_sigma), a bound whatever their weights and signs (a share by weight is not honest:
+        docs/method.md#clocks-and-the-marker-survey-sync-survey)."""
         return max((self.clock_sigma.get(c, 0.0) for c in cameras or self.clock_sigma), default=0.0)
 
     def contributing(self) -> tuple[str, ...]:

@@ -7,7 +7,7 @@ ambiguous adds, per option, a χ² of what that option says against what is know
 
 - the jacket marker's own corners (the perspective IPPE could not settle in one frame adds up over frames);
 - the topside's corners, through the filter's topside state and its covariance (a Mahalanobis distance: a topside
-  known to 70 mm tells options that put its markers metres apart, however poorly it is known beyond that), unless
+  known to centimetres tells options that put its markers metres apart, however poorly it is known beyond that), unless
   no option fits them (then the topside's state is off), and capped at EVIDENCE_CAP times their gate;
 - before the topside is placed, its tilt: it hangs near level under the right option (σ LEVEL_SIGMA_RAD);
 - once, the camera's surveyed position (rig: position, position_sigma) against each option's.

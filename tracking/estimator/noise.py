@@ -144,8 +144,8 @@ class CornerNoise:
     """A camera's corner noise, measured from the residuals of its body-pose fits (views of two markers or more): a
     fit's RMS² × its corner coordinates over the median χ² of its degrees of freedom estimates σ²; the camera's σ is
     the median of the last CORNER_NOISE_SAMPLES (robust to a frame a raindrop struck), never below CORNER_NOISE_PX.
-    A real camera's compression, rolling shutter and calibration leave more than a render does (four webcams at
-    1280×720: 0.2-0.3 px RMS), and a gate or a weight at CORNER_NOISE_PX would refuse or over-trust them."""
+    A real camera's compression, rolling shutter and calibration leave more than a render does, and a gate or a weight
+    at CORNER_NOISE_PX would refuse or over-trust them (docs/method.md#real-cameras-prints-mirrors-and-motion)."""
 
     samples: deque = field(default_factory=lambda: deque(maxlen=CORNER_NOISE_SAMPLES))  # σ² estimates, px²
 

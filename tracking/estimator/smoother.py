@@ -47,8 +47,7 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
     the nominal of each step as the state, which holds to first order. A cone is shown where the live filter showed
     it at that step (its σ limit and warm-up), with the live filter's covariance: the smoothed covariance counts the
     frames after a step as independent of those before it, but a view's persistent corner errors are in both, so it
-    claimed σ of 30-45 mm at cones far from every marker (offsets resting on the topside's rotation) that were
-    100-200 mm off, and cones the live filter withheld were shown.
+    understates σ at cones far from every marker (evidence in docs/method.md#fusion-the-default).
     """
     kf = TopsideFilter(rig, tuning or FilterTuning())
     steps: list[FilterStep] = []
