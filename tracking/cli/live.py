@@ -7,6 +7,7 @@ what was recorded under its final names and stops the viewer it started.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -52,6 +53,8 @@ SpeedOption = Annotated[float, typer.Option(help="Replay speed of video files (1
                                             callback=finite(0.0, allow_inf=True))]
 DurationOption = Annotated[float | None, typer.Option(help="Stop after this many seconds of capture time.",
                                                       callback=finite(0.0))]
+LoopOption = Annotated[bool, typer.Option("--loop", help="Replay video files again and again, capture times running "
+                                                         "on, until --duration or Ctrl-C (soak tests).")]
 LayoutOption = Annotated[Layout, typer.Option(help="Layout stored in the recording: superintendent or analysis.")]
 ScopeOption = Annotated[ViewerScope, typer.Option(help="What the viewer (--web, --spawn) of the superintendent's "
                                                        "layout gets: superintendent (what it shows) or all "
@@ -75,6 +78,7 @@ def live(
     segment_minutes: SegmentOption = LIVE_SEGMENT_MIN,
     speed: SpeedOption = 1.0,
     duration: DurationOption = None,
+    loop: LoopOption = False,
     layout: LayoutOption = Layout.SUPERINTENDENT,
     viewer_scope: ScopeOption = ViewerScope.SUPERINTENDENT,
     web_port: WebPortOption = WEB_PORT_DEFAULT,
@@ -99,7 +103,7 @@ def live(
     try:
         if fox_address is not None:
             session.fox = _foxglove(the_rig, fox_address, port, warn=not (spawn or web))
-        session.record(speed, duration, viewer_url, segment_minutes * 60, stale, layout, viewer_scope)
+        session.record(speed, duration, viewer_url, segment_minutes * 60, stale, layout, viewer_scope, loop)
     except KeyboardInterrupt:
         err_console.print("stopped")
     finally:
@@ -170,9 +174,10 @@ class LiveSession:
         return self.writer.rows if self.writer is not None else 0
 
     def record(self, speed: float, duration: float | None, viewer_url: str | None, segment_s: float, stale_s: float,
-               layout: Layout, viewer_scope: ViewerScope) -> None:
-        """Track every camera (video files replayed at speed) until duration s of capture time (None: until stopped)
-        into the recording, in segment_s files and streamed to the viewer at viewer_url, and the offsets CSV."""
+               layout: Layout, viewer_scope: ViewerScope, loop: bool = False) -> None:
+        """Track every camera (video files replayed at speed, again and again with loop) until duration s of capture
+        time (None: until stopped) into the recording, in segment_s files and streamed to the viewer at viewer_url,
+        and the offsets CSV."""
         from tracking.live import LiveTracker
         from tracking.offsets_csv import OffsetsWriter
         from viewer.session import Recorder
@@ -183,7 +188,7 @@ class LiveSession:
         with OffsetsWriter(self.outputs.claim(self.out)) as self.writer:
             console.print(f"recording to {self.rrd.with_name(self.rrd.stem + '-*.rrd')} and {self.writer.path} "
                           f"(renamed {self.out.name} when the session ends)", markup=False, soft_wrap=True)
-            with LiveTracker(self.rig, speed=speed) as tracker:
+            with LiveTracker(self.rig, speed=speed, loop_until=math.inf if loop else None) as tracker:
                 console.print(f"live: {len(tracker.names)} cameras; Ctrl-C stops and keeps everything recorded")
                 for e in self._estimates(tracker, duration):
                     self.writer.write(e)
