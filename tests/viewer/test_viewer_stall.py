@@ -17,6 +17,7 @@ import pytest
 
 from tests.conftest import FPS, REPO, T0
 from tests.viewer.test_playback import free_port
+from viewer.readback import chunks_by_entity, component_rows
 
 CAPTURE_S = 30.0  # capture time a session runs (--duration, the clip looped): before the fix, the viewer's server
 # stopped taking data 15-18 s in ("all" scope: 1024 messages or 128 MB queued for the stuck page) and recording stopped
@@ -124,3 +125,62 @@ def test_a_stuck_page_stops_neither_the_recording_nor_the_csv(installation: Path
     assert rows["time"].max() >= T0 + CAPTURE_S - 1.0
     assert len(rows) >= 0.8 * CAPTURE_S * 2 * FPS  # a row a frame of either camera, less the first frames'
     assert proc.stderr.count("cut loose") <= 1  # a viewer that falls behind is cut loose once, with one line
+
+
+STALL_S = 1.0  # the test's feed cuts a viewer loose after this (the tool's: viewer.feed.VIEWER_STALL_S)
+LAPS = 5  # the clip replayed this often in real time: ~4.5 s, the stall seen several times over
+
+
+@pytest.mark.parametrize("how", ["stopped", "gone"])
+def test_a_stopped_or_gone_viewer_is_cut_loose_and_the_recording_goes_on(
+        installation: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str], how: str) -> None:
+    """The tool's own web viewer, SIGSTOPped (its input never read again) or killed (its input closed), fed the whole
+    recording ("all"): cut loose once, with one line on stderr; no update waits for it; every frame is in the file."""
+    from dataclasses import replace
+
+    import rerun as rr
+
+    from tracking.live import LiveUpdate
+    from tracking.pipeline import track_rig
+    from tracking.rig import load_rig
+    from viewer.feed import ViewerFeed
+    from viewer.playback import start_live_viewer, stop_viewer
+    from viewer.session import Recorder
+
+    rr.set_strict_mode(True)
+    rig = load_rig(installation / "rig.yaml")
+    results = list(track_rig(rig, packets=True))
+    span = max(r.time for r in results) - min(r.time for r in results) + 1 / FPS
+    process = start_live_viewer(web=True, grpc_port=free_port(), web_port=free_port())
+    try:
+        feed = ViewerFeed(process.stdin, stall_s=STALL_S)
+        recorder = Recorder(rig, tmp_path / "live.rrd", viewer=feed, segment_s=0.5, layout="superintendent",
+                            viewer_scope="all")
+        os.killpg(process.pid, signal.SIGSTOP if how == "stopped" else signal.SIGKILL)
+        slowest = 0.0
+        for k in range(LAPS):
+            lap = [replace(r, frame=replace(r.frame, time=r.time + k * span, index=r.frame.index + k * 100))
+                   for r in results]
+            for r in lap:  # one update a frame, at the frames' own pace
+                start = time.monotonic()
+                recorder.on_update(LiveUpdate(now=r.time, results=[r]))
+                slowest = max(slowest, time.monotonic() - start)
+                time.sleep(max(0.0, 1 / (2 * FPS) - (time.monotonic() - start)))
+        start = time.monotonic()
+        recorder.close()
+        closing = time.monotonic() - start
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGCONT)  # so that it can end
+        stop_viewer(process)
+    assert feed.cut_reason is not None and feed.cut_reason.startswith("took nothing" if how == "stopped" else "is")
+    assert capfd.readouterr().err.count("cut loose") == 1
+    assert slowest < 0.5 and closing < 5.0  # nobody waited for the viewer
+    frames = 0
+    for name in pd.read_csv(tmp_path / "live.segments.csv")["file"]:
+        chunks = chunks_by_entity(tmp_path / name)
+        frames += len(component_rows(chunks["/world/cameras/cam-port/image"], "VideoStream:sample")[0])
+    assert frames >= LAPS * sum(r.camera == "cam-port" for r in results)  # segments open with their GOP: >=
+    with capfd.disabled():  # the numbers, for `pytest -s`
+        print(f"\n{how}: cut loose ({feed.cut_reason}) after {feed.sent / 1e6:.1f} MB taken; slowest update "
+              f"{slowest * 1e3:.0f} ms, close {closing:.2f} s")
