@@ -20,6 +20,7 @@ import time
 from collections import deque
 from typing import IO
 
+import numpy as np
 import rerun as rr
 
 VIEWER_STALL_S = 10.0  # a viewer that takes no byte for this long while some wait is stuck: a healthy one reads at
@@ -51,6 +52,7 @@ class ViewerFeed:
             pass
         self._sources: list[rr.BinaryStream] = []
         self._pending: deque[memoryview] = deque()  # whole reads of the streams, in order; the first partly sent
+        self._read_at: deque[float] = deque()  # the live clock when each of them was read
         self.pending_bytes = 0
         self._taken = time.monotonic()  # when the viewer last took bytes, or had nothing waiting
         self.sent = 0  # bytes the viewer took
@@ -67,13 +69,15 @@ class ViewerFeed:
         self._sources.append(sink)
         return sink
 
-    def pump(self) -> None:
-        """Take what the streams have encoded and write what the viewer takes now; cut it loose when it is stuck or
-        too far behind. Once cut loose, the streams' bytes are read and dropped (memory stays bounded)."""
+    def pump(self, now: float = np.nan) -> None:
+        """Take what the streams have encoded (read at the live clock's now) and write what the viewer takes now;
+        cut it loose when it is stuck or too far behind. Once cut loose, the streams' bytes are read and dropped
+        (memory stays bounded)."""
         for source in self._sources:
             data = source.read(flush=False)
             if data and self.alive:
                 self._pending.append(memoryview(data))
+                self._read_at.append(now)
                 self.pending_bytes += len(data)
         if not self.alive:
             return
@@ -101,8 +105,16 @@ class ViewerFeed:
             self.pending_bytes -= n
             if n == len(self._pending[0]):
                 self._pending.popleft()
+                self._read_at.popleft()
             else:
                 self._pending[0] = self._pending[0][n:]
+
+    def behind(self, now: float) -> float:
+        """How far the viewer's input is behind the live clock, s: how long the oldest bytes still waiting for it
+        have waited (0 when it has taken everything; the viewer's own queues are not seen here)."""
+        if not self._read_at or not np.isfinite(self._read_at[0]):
+            return 0.0
+        return max(0.0, now - self._read_at[0])
 
     def cut(self, why: str) -> None:
         """Stop feeding the viewer: its input closed, what waited for it dropped, one line on stderr."""
@@ -110,6 +122,7 @@ class ViewerFeed:
             return
         self.cut_reason = why
         self._pending.clear()
+        self._read_at.clear()
         self.pending_bytes = 0
         self._close_pipe()
         print(f"warning: {self.name} {why}: cut loose (its stream closed); the recording and the offsets CSV go on",

@@ -401,14 +401,14 @@ class Recorder:
         self._compactor.poll()
         if update.now - self._board_logged >= BOARD_PERIOD_S:
             self._log_board(update)
-        self._feed_viewer()
+        self._feed_viewer(update.now)
 
-    def _feed_viewer(self) -> None:
+    def _feed_viewer(self, now: float) -> None:
         """Send the live viewer what it takes now, without waiting; once it is cut loose, nothing more is logged
         for it (its own stream dropped; the file's stream loses its copy for it at the next segment)."""
         if self._viewer is None:
             return
-        self._viewer.pump()
+        self._viewer.pump(now)
         if not self._viewer.alive and self._view is not None:
             self._view = None
             self._layouts = self._layouts[:1]  # the file's layout sender only
@@ -418,11 +418,12 @@ class Recorder:
         if self._estimates and update.now - self._estimates[0].time >= FLUSH_S:  # a series per call: fewer chunks
             self.flush_estimates()
         self._board_logged = update.now
+        behind = self._viewer.behind(update.now) if self._viewer is not None else 0.0
         for cone in self.cones:
-            reading = cone_reading(self.status.latest.get(cone), cone, update.now, update.last_measurement,
-                                   self.stale_s)
-            for stream in self._streams():
-                log_cone_reading(stream, reading, update.now, self.stale_s)
+            args = (self.status.latest.get(cone), cone, update.now, update.last_measurement, self.stale_s)
+            log_cone_reading(self.rec, cone_reading(*args), update.now, self.stale_s)
+            if self._view is not None:  # the viewer's own stream: grey while its input is behind (the file: not)
+                log_cone_reading(self._view, cone_reading(*args, behind=behind), update.now, self.stale_s)
         for stream in self._streams():
             log_camera_health(stream, update.cameras, update.now)
         self._send_layout_if_changed(update.now)

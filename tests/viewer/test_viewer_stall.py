@@ -12,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -184,3 +185,52 @@ def test_a_stopped_or_gone_viewer_is_cut_loose_and_the_recording_goes_on(
     with capfd.disabled():  # the numbers, for `pytest -s`
         print(f"\n{how}: cut loose ({feed.cut_reason}) after {feed.sent / 1e6:.1f} MB taken; slowest update "
               f"{slowest * 1e3:.0f} ms, close {closing:.2f} s")
+
+
+def test_a_view_behind_the_live_clock_says_so(installation: Path, tmp_path: Path) -> None:
+    """The superintendent's own stream, its viewer not reading for 9 s of capture (then reading again): the cone
+    panels it gets while its input is more than VIEW_BEHIND_S behind are grey, "behind by N s"; the file's are not."""
+    import threading
+    from dataclasses import replace
+
+    import rerun as rr
+
+    from tracking.estimate import ConeEstimate
+    from tracking.live import LiveUpdate
+    from tracking.pipeline import track_rig
+    from tracking.rig import load_rig
+    from viewer.feed import ViewerFeed
+    from viewer.playback import rerun_binary, rerun_env
+    from viewer.session import BATCH_TICK_S, Recorder
+    from viewer.superintendent import VIEW_BEHIND_S
+
+    rr.set_strict_mode(True)
+    rig = load_rig(installation / "rig.yaml")
+    results = list(track_rig(rig, packets=True))
+    span = max(r.time for r in results) - min(r.time for r in results) + 1 / FPS
+    read, write = os.pipe()
+    feed = ViewerFeed(os.fdopen(write, "wb"), stall_s=600.0)  # slow, not stuck: never cut loose here
+    recorder = Recorder(rig, tmp_path / "live.rrd", viewer=feed, segment_s=2.0, layout="superintendent")
+    for k in range(10):  # the live clock runs 9 s ahead of what the unread pipe took
+        time.sleep(BATCH_TICK_S + 0.1)  # a lap's rows reach the viewer's bytes (in wall time) before the next lap
+        for r in results:
+            r = replace(r, frame=replace(r.frame, time=r.time + k * span, index=r.frame.index + k * 100))
+            estimate = ConeEstimate(r.time, "A", np.full(3, 0.01), (r.camera,), np.eye(3) * 1e-6)
+            recorder.on_update(LiveUpdate(now=r.time, results=[r], estimates=[estimate], last_measurement=r.time))
+    assert feed.alive and feed.behind(results[-1].time + 9 * span) > VIEW_BEHIND_S
+    view = tmp_path / "view.rrd"
+    with view.open("wb") as out:  # the viewer reads again
+        reader = threading.Thread(target=lambda: out.write(os.fdopen(read, "rb").read()))
+        reader.start()
+        recorder.close()
+        reader.join(30.0)
+    subprocess.run([rerun_binary(), "rrd", "merge", str(view), "-o", str(tmp_path / "merged.rrd")], check=True,
+                   capture_output=True, env=rerun_env())
+    shown = [t[0] for t in component_rows(chunks_by_entity(tmp_path / "merged.rrd")["/superintendent/cones/A"],
+                                          "TextDocument:text")[1]]
+    assert any("NO DATA" in t and "behind the live clock" in t for t in shown)
+    assert any("14 mm" in t and "0.00 s old at" in t for t in shown)  # figures while it kept up
+    recorded = [t[0] for name in pd.read_csv(tmp_path / "live.segments.csv")["file"]
+                for t in component_rows(chunks_by_entity(tmp_path / name)["/superintendent/cones/A"],
+                                        "TextDocument:text")[1]]
+    assert recorded and not any("behind" in t for t in recorded)  # the record says what was measured
