@@ -20,9 +20,9 @@ from tests.conftest import FPS, REPO, T0
 from tests.viewer.test_playback import free_port
 from viewer.readback import chunks_by_entity, component_rows
 
-CAPTURE_S = 30.0  # capture time a session runs (--duration, the clip looped): before the fix, the viewer's server
-# stopped taking data 15-18 s in ("all" scope: 1024 messages or 128 MB queued for the stuck page) and recording stopped
-# at the next segment boundary
+CAPTURE_S = 30.0  # capture time a session runs (--duration, the clip looped): before the fix ("all" scope), recording
+# and CSV stopped 10 s in (1 s segments; 18 s with 5 s segments), at the first segment boundary after the viewer's
+# server had stopped taking data (1024 messages or 128 MB queued for the stuck page)
 START_S = 30.0  # the session's start (workers loading, the viewer's server listening), on a loaded 2-core machine
 LATE_S = 4.0  # a segment's file may open this much after its capture time is due (CPU on 2 cores, compactions)
 CSV_GAP_S = 8.0  # the CSV is flushed every 100 rows, ~3.3 s at 30 rows/s: a longer silence is a stalled CSV
