@@ -27,6 +27,7 @@ SPLIT_UNITS = {"ns": 1e-9, "us": 1e-6, "µs": 1e-6, "ms": 1e-3, "s": 1.0}
 GRPC_PORT = 9876
 WEB_PORT = 9090
 VIEWER_MEMORY_LIMIT = "2GB"  # a six-hour session: the viewer drops the oldest data beyond this, the file keeps all
+STDIN = "-"  # rerun's data source for its standard input: what a live session feeds (viewer/feed.py)
 # Rerun's analytics pipeline (re_analytics, native/pipeline.rs) starts nothing when CI is set ("Analytics disabled on
 # CI"); FORCE_RERUN_ANALYTICS would override that, so it is dropped. The user's own analytics.json is left alone.
 ANALYTICS_OFF = {"CI": "1"}
@@ -203,12 +204,14 @@ def viewer_command(recording: Path, web: bool = False, address: str = "127.0.0.1
 
 def live_viewer_command(web: bool, address: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT
                         ) -> list[str]:
-    """The rerun command line of a viewer that a live session streams to; its servers listen on the address only."""
+    """The rerun command line of a viewer that a live session streams to through its standard input ("-": an .rrd
+    stream, viewer/feed.py); its servers listen on the address only."""
     if web:  # newest first: a tablet that connects late draws the present first, then the backlog behind it
         return [rerun_binary(), "--serve-web", "--bind", address, "--port", str(grpc_port),
-                "--web-viewer-port", str(web_port), "--server-memory-limit", VIEWER_MEMORY_LIMIT, "--newest-first"]
+                "--web-viewer-port", str(web_port), "--server-memory-limit", VIEWER_MEMORY_LIMIT, "--newest-first",
+                STDIN]
     return [rerun_binary(), "--bind", address, "--port", str(grpc_port), "--memory-limit", VIEWER_MEMORY_LIMIT,
-            "--expect-data-soon"]
+            "--expect-data-soon", STDIN]
 
 
 class StopSignals:
@@ -346,16 +349,16 @@ def view_recording(recording: Path, start: float | None = None, end: float | Non
 
 
 def start_live_viewer(web: bool, bind: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT
-                      ) -> tuple[str, subprocess.Popen]:
-    """Start a viewer that a live session streams to: (its gRPC URL, the process), listening on --bind only."""
+                      ) -> subprocess.Popen:
+    """Start a viewer that a live session streams to through its stdin (process.stdin, for viewer.feed.ViewerFeed),
+    listening on --bind only."""
     if not web and not has_display():
         raise InputError("--spawn", "no display for the native viewer (use --web for a browser or tablet)")
     address = resolve_bind(bind)
     warn_if_exposed(address)
-    process = subprocess.Popen(live_viewer_command(web, address, grpc_port, web_port), stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL, env=rerun_env(), start_new_session=True,
-                               preexec_fn=die_with_parent)
-    return grpc_url(connect_host(address), grpc_port), process
+    return subprocess.Popen(live_viewer_command(web, address, grpc_port, web_port), stdin=subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=rerun_env(),
+                            start_new_session=True, preexec_fn=die_with_parent)
 
 
 def _group_alive(process: subprocess.Popen) -> bool:
@@ -372,6 +375,11 @@ def _group_alive(process: subprocess.Popen) -> bool:
 
 def stop_viewer(process: subprocess.Popen, timeout: float = STOP_TIMEOUT_S) -> None:
     """Stop a viewer and its whole process group: SIGTERM, then SIGKILL for whatever is left after the timeout."""
+    if process.stdin is not None:  # a live viewer's input, if its feed has not closed it
+        try:
+            process.stdin.close()
+        except OSError:
+            pass
     try:
         os.killpg(process.pid, signal.SIGTERM)
     except ProcessLookupError:

@@ -6,7 +6,6 @@ import csv
 import io
 import os
 import subprocess
-import sys
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -29,6 +28,7 @@ from tracking.pipeline import FrameResult, Sink
 from tracking.rig import Rig
 from viewer.archive import ArchiveInputs
 from viewer.blueprint import LayoutSender, analysis_blueprint
+from viewer.feed import ViewerFeed
 from viewer.installation import log_concentricity, log_installation, log_true_topside, true_topside_poses
 from viewer.playback import rerun_binary, rerun_env
 from viewer.recording import (
@@ -71,10 +71,10 @@ FLUSH_S = 0.5  # estimates are sent in columns covering this much capture time (
 AGES_PERIOD_S = 0.2  # camera frame ages are logged this often
 BOARD_PERIOD_S = 0.2  # the superintendent's figures refresh this often (capture time)
 BLUEPRINT_MIN_PERIOD_S = 30.0  # a changed camera-per-cone choice re-sends the live layout at most this often
-BACKLOG_PERIOD_S = 2.0  # every this much capture time the logger waits for its sinks (memory stays bounded)
-BACKLOG_TIMEOUT_S = 0.5  # ... but at most this long: a slow viewer must not stall the live loop
-CLOSE_TIMEOUT_S = 10.0  # at the end, a live viewer is waited for this long at most
-BACKLOG_MAX_PERIOD_S = 60.0  # after timeouts the period doubles up to this (a dead viewer costs < 1 % of the time)
+BACKLOG_PERIOD_S = 2.0  # every this much capture time the logger waits for its file (memory stays bounded)
+BACKLOG_TIMEOUT_S = 0.5  # ... but at most this long: a slow disk must not stall the live loop
+CLOSE_TIMEOUT_S = 10.0  # at the end, a live viewer is offered what is left for this long at most
+BACKLOG_MAX_PERIOD_S = 60.0  # after timeouts the period doubles up to this (a slow disk costs < 1 % of the time)
 VIEWER_SCOPES = ("superintendent", "all")  # what a live viewer of the superintendent's layout is sent
 
 
@@ -129,7 +129,8 @@ class Recorder:
     """Logs frames and estimates of one tracked installation into a Rerun recording.
 
     rrd: file to write; with segment_s, a new file <stem>-NNN.rrd every segment_s of capture time, listed in
-    <stem>.segments.csv, with the layout in <stem>.rbl. viewer: gRPC URL of a viewer to stream to as well (live).
+    <stem>.segments.csv, with the layout in <stem>.rbl. viewer: the input of a live viewer to stream to as well,
+    never waited for (viewer/feed.py: a viewer that cannot keep up is cut loose, the file goes on).
     viewer_scope: with the superintendent's layout, "superintendent" sends the viewer only what that layout shows
     (its figures, and the images of the cameras it shows) through a stream of its own, so a tablet keeps up and opens
     at once; "all" sends it everything the file gets. forward: more sinks (on_frame, on_estimate) that get every
@@ -138,7 +139,7 @@ class Recorder:
 
     def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
                  show_rejected: bool = False, recording_id: str | None = None,
-                 jpeg_quality: int = JPEG_QUALITY, viewer: str | None = None, segment_s: float | None = None,
+                 jpeg_quality: int = JPEG_QUALITY, viewer: ViewerFeed | None = None, segment_s: float | None = None,
                  stale_s: float = STALE_S, layout: str = "analysis",
                  options: Mapping[str, str] | None = None, estimate_period_s: float = 0.0,
                  viewer_scope: str = "superintendent", forward: Sequence[Sink] = ()) -> None:
@@ -185,24 +186,30 @@ class Recorder:
         self.backlog_timeouts = 0  # waits for the sinks that ran out of time
         self._layout: Path | None = None  # segmented: the stored blueprint, merged into each segment when compacted
         self._view: rr.RecordingStream | None = None  # the viewer's own stream (superintendent scope), else None
+        self._tee: rr.BinaryStream | None = None  # "all" scope: the file's stream, encoded for the viewer too
         self._shown: set[str] = set()  # cameras whose images the viewer's own stream carries
         self._open_sinks(viewer_scope)
 
     def _open_sinks(self, viewer_scope: str) -> None:
-        """The viewer's own stream (superintendent scope) with its target circles, and the first file."""
+        """The viewer's own stream (superintendent scope) with its target circles, or the file's stream encoded for
+        the viewer too ("all"); and the first file. The file's sinks never include a viewer's connection."""
         if self._viewer is not None and self.layout == "superintendent" and viewer_scope == "superintendent":
             self._view = rr.RecordingStream(APP_ID, recording_id=self.rec.get_recording_id(),
                                             batcher_config=rr.ChunkBatcherConfig(flush_tick=BATCH_TICK_S,
                                                                                  flush_num_bytes=BATCH_BYTES))
-            self._view.set_sinks(rr.GrpcSink(self._viewer), default_blueprint=self._stored_blueprint())
+            self._view.set_sinks(self._viewer.stream(self._view), default_blueprint=self._stored_blueprint())
             for cone in self.cones:
                 log_target_circle(self._view, cone, cone in self.marked)
+        elif self._viewer is not None:
+            self._tee = self._viewer.stream(self.rec)
         if self._rrd is not None:
             self._rrd.parent.mkdir(parents=True, exist_ok=True)
             if self._segment_s:
                 self._layout = self._rrd.with_name(f"{self._rrd.stem}.rbl")
                 self._stored_blueprint().save(APP_ID, self._layout)
         self._open(self._writing_path(0) if self._segment_s else self._rrd)
+        if self._viewer is not None:
+            self._viewer.send_now(CLOSE_TIMEOUT_S)  # the layout and static data: the viewer's servers start on them
 
     def _stored_blueprint(self) -> rrb.Blueprint:
         """The layout a file opens with."""
@@ -228,8 +235,8 @@ class Recorder:
         # A footer indexes every chunk, held in memory until the file closes (~5 kB a chunk, ~140 chunks/s live):
         # segments are written without one, and the compactor (`rerun rrd optimize`) adds it once closed.
         sinks: list = [rr.FileSink(path, write_footer=not self._segment_s)] if path is not None else []
-        if self._viewer is not None and self._view is None:
-            sinks.append(rr.GrpcSink(self._viewer))
+        if self._tee is not None and self._viewer is not None and self._viewer.alive:
+            sinks.append(self._tee)  # in memory, never waiting: viewer/feed.py sends it as the viewer takes it
         if sinks:
             # rerun-sdk 0.41 never frees the stream a blueprint is built in (~0.7-2.4 MB each): over six hours of
             # 1-minute segments that is the main process's whole growth. Only the first segment gets it here; the
@@ -329,12 +336,11 @@ class Recorder:
             self._drained = result.time
 
     def _drain(self) -> None:
-        """Wait (bounded) until the sinks have taken what was logged: faster than real time, or with the CPU
-        saturated, rerun's writer otherwise falls behind and its queue grows by the whole segment. A sink that
-        keeps timing out (a live viewer gone) is waited for ever more rarely, so it cannot slow the tracking."""
+        """Wait (bounded) until the file has taken what was logged: faster than real time, or with the CPU
+        saturated, rerun's writer otherwise falls behind and its queue grows by the whole segment. A file that
+        keeps timing out (a slow disk) is waited for ever more rarely, so it cannot slow the tracking."""
         try:
-            for stream in self._streams():
-                stream.flush(timeout_sec=BACKLOG_TIMEOUT_S)
+            self.rec.flush(timeout_sec=BACKLOG_TIMEOUT_S)  # the viewer's stream is never waited for (viewer/feed.py)
             self._drain_period = BACKLOG_PERIOD_S
         except RuntimeError:  # "Flush timed out": the data stays queued and goes out with the next one
             self.backlog_timeouts += 1
@@ -395,17 +401,29 @@ class Recorder:
         self._compactor.poll()
         if update.now - self._board_logged >= BOARD_PERIOD_S:
             self._log_board(update)
+        self._feed_viewer(update.now)
+
+    def _feed_viewer(self, now: float) -> None:
+        """Send the live viewer what it takes now, without waiting; once it is cut loose, nothing more is logged
+        for it (its own stream dropped; the file's stream loses its copy for it at the next segment)."""
+        if self._viewer is None:
+            return
+        self._viewer.pump(now)
+        if not self._viewer.alive and self._view is not None:
+            self._view = None
+            self._layouts = self._layouts[:1]  # the file's layout sender only
 
     def _log_board(self, update: LiveUpdate) -> None:
         """Every cone's reading and the camera table at the update's live time; the estimates waiting FLUSH_S."""
         if self._estimates and update.now - self._estimates[0].time >= FLUSH_S:  # a series per call: fewer chunks
             self.flush_estimates()
         self._board_logged = update.now
+        behind = self._viewer.behind(update.now) if self._viewer is not None else 0.0
         for cone in self.cones:
-            reading = cone_reading(self.status.latest.get(cone), cone, update.now, update.last_measurement,
-                                   self.stale_s)
-            for stream in self._streams():
-                log_cone_reading(stream, reading, update.now, self.stale_s)
+            args = (self.status.latest.get(cone), cone, update.now, update.last_measurement, self.stale_s)
+            log_cone_reading(self.rec, cone_reading(*args), update.now, self.stale_s)
+            if self._view is not None:  # the viewer's own stream: grey while its input is behind (the file: not)
+                log_cone_reading(self._view, cone_reading(*args, behind=behind), update.now, self.stale_s)
         for stream in self._streams():
             log_camera_health(stream, update.cameras, update.now)
         self._send_layout_if_changed(update.now)
@@ -461,13 +479,9 @@ class Recorder:
         self.status.log_if_due(self.rec, self._last_time, force=True)
         if self._last_update is not None:
             self._log_board(self._last_update)
-        try:
-            self.rec.flush(timeout_sec=CLOSE_TIMEOUT_S if self._viewer and self._view is None else 1e38)
-            if self._view is not None:
-                self._view.flush(timeout_sec=CLOSE_TIMEOUT_S)
-        except RuntimeError:  # only a live viewer that is gone can time out; the file sink has taken everything
-            print(f"warning: the live viewer at {self._viewer} did not take the last data; the recording is "
-                  "complete", file=sys.stderr)
+        self.rec.flush(timeout_sec=1e38)  # the file: no viewer's sink is among its sinks, nothing of it can wait
+        if self._viewer is not None:
+            self._viewer.close(CLOSE_TIMEOUT_S)
         self.rec.disconnect()
         if self._view is not None:
             self._view.disconnect()

@@ -19,6 +19,7 @@ The live image per cone is the 2-D view of the camera that measures that cone mo
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import StrEnum
@@ -43,6 +44,8 @@ ARROW_MM = 0.35 * TOLERANCE_MM  # a cone beyond the ring: an arrow this long fro
 MIN_DOT_MM = 8.0  # the cone's dot is its 2σ, but never smaller than this
 STATE_RING_PX = 3.0  # the state ring's half-width, UI points (the same on every screen)
 TREND_S = 60.0
+VIEW_BEHIND_S = 3.0  # a view whose input is this far behind the live clock shows its cones grey: its figures are old
+WALL_CLOCK_AFTER = 1e9  # capture times beyond this are Unix times (live cameras), shown as the time of day
 WHY_Y_MM = 0.5 * TOLERANCE_MM  # NO DATA's reason: inside the ring, below its centre (clear of the compass words)
 NOWHERE = np.zeros((0, 2))  # an empty batch: the part is gone from the view from this time on
 NO_LABELS: list[str] = []  # logged, not left out: the viewer would otherwise keep an earlier row's label
@@ -82,16 +85,20 @@ class ConeReading:
     age: float  # now minus the newest accepted measurement, s
     cameras: tuple[str, ...]
     withheld: str = ""  # why the estimator withheld the offset (tracking.estimate.WITHHELD_*), when it says
+    now: float = np.nan  # the live clock the reading was made at (capture time)
+    behind: float = 0.0  # how far the view this reading is for is behind the live clock, s (viewer.feed)
 
 
 def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_measurement: float | None,
-                 stale_s: float = STALE_S) -> ConeReading:
-    """Classify a cone's newest estimate against the tolerance and its age."""
+                 stale_s: float = STALE_S, behind: float = 0.0) -> ConeReading:
+    """Classify a cone's newest estimate against the tolerance and its age; for a view behind the live clock by
+    more than VIEW_BEHIND_S, NO DATA (its figures are that old)."""
     age = np.inf if last_measurement is None else max(0.0, now - last_measurement)
-    if estimate is None or not np.all(np.isfinite(estimate.offset)) or age > stale_s:
+    late = behind > VIEW_BEHIND_S
+    if estimate is None or not np.all(np.isfinite(estimate.offset)) or age > stale_s or late:
         offset = np.full(3, np.nan) if estimate is None else estimate.offset
         withheld = estimate.withheld if estimate is not None and age <= stale_s else ""
-        return ConeReading(cone, ConeState.NO_DATA, np.nan, np.nan, offset, age, (), withheld)
+        return ConeReading(cone, ConeState.NO_DATA, np.nan, np.nan, offset, age, (), withheld, now, behind)
     dx, dy = estimate.offset[:2]
     r = concentricity(estimate.offset)
     cov = estimate.covariance[:2, :2] if estimate.covariance is not None else np.zeros((2, 2))
@@ -103,11 +110,15 @@ def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_meas
         state = ConeState.AMBER
     else:
         state = ConeState.GREEN
-    return ConeReading(cone, state, r, sigma, estimate.offset, age, estimate.cameras)
+    return ConeReading(cone, state, r, sigma, estimate.offset, age, estimate.cameras, now=now, behind=behind)
 
 
 def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool = False) -> str:
     """Why a cone shows NO DATA (short: a few words, for the bull's-eye)."""
+    if reading.behind > VIEW_BEHIND_S:
+        return (f"view behind by {reading.behind:.0f} s" if short
+                else f"this view is {reading.behind:.0f} s behind the live clock (it cannot keep up): what it "
+                     "shows is that old")
     if not np.isfinite(reading.age):
         return "no measurement yet"
     if reading.age > stale_s:
@@ -136,7 +147,14 @@ def cone_markdown(reading: ConeReading, stale_s: float = STALE_S) -> str:
             f"**{HEADLINES[reading.state]}** · ±{CONFIDENCE_SIGMAS * reading.sigma * 1000:.0f} mm (2σ) of "
             f"{TOLERANCE_MM:.0f}\n\n"
             f"Δx {dx * 1000:+.0f} · Δy {dy * 1000:+.0f} · Δz {dz * 1000:+.0f} mm · "
-            f"{', '.join(reading.cameras) or 'the filter alone'} · {reading.age:.2f} s old")
+            f"{', '.join(reading.cameras) or 'the filter alone'} · {reading.age:.2f} s old"
+            + (f" at {clock_text(reading.now)}" if np.isfinite(reading.now) else ""))
+
+
+def clock_text(t: float) -> str:
+    """A capture time as the superintendent compares it with a clock: the time of day (live cameras' Unix times),
+    else seconds of the replay."""
+    return time.strftime("%H:%M:%S", time.localtime(t)) if t > WALL_CLOCK_AFTER else f"{t:.1f} s"
 
 
 def cameras_markdown(cameras: Mapping[str, CameraHealth], now: float) -> str:

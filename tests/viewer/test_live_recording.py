@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -14,7 +15,7 @@ from rerun.chunk import RrdReader
 
 from tracking.estimate import WITHHELD_CLOCKS, WITHHELD_SCALE, ConeEstimate
 from viewer.readback import chunks_by_entity, component_rows
-from viewer.superintendent import ConeState, cone_markdown, cone_reading, no_data_reason
+from viewer.superintendent import ConeState, clock_text, cone_markdown, cone_reading, no_data_reason
 
 
 @pytest.fixture(scope="module")
@@ -100,6 +101,13 @@ def test_cone_states() -> None:
     old_news = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_CLOCKS), "A", 10.8, 10.2)
     assert no_data_reason(old_news, short=True) == "newest 0.6 s old"  # a stale reading: its age, not its clocks
     assert cone_reading(None, "A", 10.1, None).state == ConeState.NO_DATA
+    fresh = cone_reading(estimate([0.03, 0.04, 1.0]), "A", 10.1, 10.05)
+    assert "0.05 s old at 10.1 s" in cone_markdown(fresh)  # its age against the live clock, and that clock
+    assert cone_reading(estimate([0.03, 0.04, 1.0]), "A", 10.1, 10.05, behind=2.0).state == ConeState.GREEN
+    late = cone_reading(estimate([0.03, 0.04, 1.0]), "A", 10.1, 10.05, behind=7.4)  # the view lags the live clock
+    assert late.state == ConeState.NO_DATA and no_data_reason(late, short=True) == "view behind by 7 s"
+    assert "7 s behind the live clock" in cone_markdown(late) and viewer_safe(cone_markdown(late))
+    assert re.fullmatch(r"\d\d:\d\d:\d\d", clock_text(1.7e9))  # a live camera's Unix time: the time of day
 
 
 def test_a_window_of_the_segments(live_run: Path, tmp_path: Path) -> None:

@@ -17,6 +17,7 @@ import pytest
 import rerun as rr
 
 from tracking.errors import InputError
+from viewer.feed import ViewerFeed
 from viewer.playback import (
     check_recording,
     live_viewer_command,
@@ -227,8 +228,13 @@ def test_rerun_runs_with_its_analytics_off(recording: Path) -> None:
 
 def test_web_viewer_serves_the_page_and_takes_the_stream_on_localhost_only() -> None:
     grpc_port, web_port = free_port(), free_port()
-    url, process = start_live_viewer(web=True, bind="127.0.0.1", grpc_port=grpc_port, web_port=web_port)
+    process = start_live_viewer(web=True, bind="127.0.0.1", grpc_port=grpc_port, web_port=web_port)
     try:
+        feed = ViewerFeed(process.stdin)  # its servers start once their input has begun
+        rec = rr.RecordingStream("topside-test")
+        rec.set_sinks(feed.stream(rec))
+        rr.log("offsets/dx/A/estimate", rr.Scalars(0.01), recording=rec)
+        feed.send_now(10.0)
         page = b""
         for _ in range(150):
             try:
@@ -238,10 +244,9 @@ def test_web_viewer_serves_the_page_and_takes_the_stream_on_localhost_only() -> 
                 time.sleep(0.2)
         assert b"<html" in page and b"Rerun" in page
         assert listening_addresses(web_port) == {"127.0.0.1"}  # not on the vessel's network unless --bind
-        rec = rr.RecordingStream("topside-test")
-        rec.set_sinks(rr.GrpcSink(url))
-        rr.log("offsets/dx/A/estimate", rr.Scalars(0.01), recording=rec)
-        rec.flush(timeout_sec=10.0)  # raises if the viewer's server does not take it
+        rr.log("offsets/dx/A/estimate", rr.Scalars(0.02), recording=rec)
+        feed.close(10.0)
+        assert feed.sent > 0 and feed.cut_reason == "closed"  # the server took it all; never cut loose
         assert process.poll() is None
     finally:
         stop_viewer(process)

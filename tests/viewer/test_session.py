@@ -161,28 +161,43 @@ def test_fused_recording_logs_uncertainty(installation: Path, tmp_path: Path) ->
     np.testing.assert_allclose([v[0] for v in sd], df["sdy"], atol=1e-5)  # the estimator's 1σ, as in the CSV
 
 
-def test_a_viewer_that_is_gone_neither_slows_nor_loses_the_recording(installation: Path, tmp_path: Path) -> None:
+def test_a_viewer_that_is_gone_neither_slows_nor_loses_the_recording(installation: Path, tmp_path: Path,
+                                                                       capfd: pytest.CaptureFixture[str]) -> None:
+    """The viewer's input closed at its end (its process ended): cut loose at once, with one line; the file has
+    every frame and never waited."""
+    import os
+    import time
     from dataclasses import replace
 
+    from tracking.live import LiveUpdate
     from tracking.pipeline import track_rig
     from tracking.rig import load_rig
-    from viewer.session import BACKLOG_TIMEOUT_S, Recorder
+    from viewer.feed import ViewerFeed
+    from viewer.session import Recorder
 
+    rr.set_strict_mode(True)
     rig = load_rig(installation / "rig.yaml")
     results = list(track_rig(rig))
     span = max(r.time for r in results) - min(r.time for r in results) + 0.1
-    recorder = Recorder(rig, tmp_path / "run.rrd", viewer="rerun+http://127.0.0.1:1/proxy")  # nobody listens
-    laps = int(np.ceil(40.0 / span))  # 40 s of capture: 20 waits for the sinks without the back-off
+    read, write = os.pipe()
+    os.close(read)  # nobody will read: a viewer that is gone
+    recorder = Recorder(rig, tmp_path / "run.rrd", viewer=ViewerFeed(os.fdopen(write, "wb")), segment_s=1.0)
+    laps = int(np.ceil(10.0 / span))  # 10 s of capture
+    start = time.monotonic()
     for k in range(laps):
-        for r in results:
-            frame = replace(r.frame, time=r.time + k * span, index=r.frame.index + k * 1000)
-            recorder.on_frame(replace(r, frame=frame))
-    assert 1 <= recorder.backlog_timeouts <= 6  # waits double after each timeout: 0.5 s each, ~5 in 40 s
-    assert recorder.backlog_timeouts * BACKLOG_TIMEOUT_S < 4.0
+        lap = [replace(r, frame=replace(r.frame, time=r.time + k * span, index=r.frame.index + k * 1000))
+               for r in results]
+        recorder.on_update(LiveUpdate(now=lap[-1].time, results=lap))
     recorder.close()
-    chunks = chunks_by_entity(tmp_path / "run.rrd")
-    times, _ = component_rows(chunks["/world/cameras/cam-port/image"], "EncodedImage:blob")
-    assert len(times) == laps * sum(r.camera == "cam-port" for r in results)  # every frame in the file
+    assert time.monotonic() - start < 30.0  # nothing waited for the viewer (a 10 s wait would show)
+    assert recorder.backlog_timeouts == 0
+    assert capfd.readouterr().err.count("cut loose") == 1  # said once
+    found = 0
+    for name in pd.read_csv(tmp_path / "run.segments.csv")["file"]:
+        times, _ = component_rows(chunks_by_entity(tmp_path / name)["/world/cameras/cam-port/image"],
+                                  "EncodedImage:blob")
+        found += len(times)
+    assert found >= laps * sum(r.camera == "cam-port" for r in results)  # every frame in the file
 
 
 def test_a_live_update_lands_in_the_segments_that_span_its_times(installation: Path, tmp_path: Path) -> None:
@@ -284,17 +299,21 @@ def test_the_viewers_own_stream_shows_a_camera_from_a_keyframe(installation: Pat
     from tracking.live import LiveUpdate
     from tracking.pipeline import track_rig
     from tracking.rig import load_rig
+    from viewer.feed import ViewerFeed
     from viewer.session import Recorder
 
     rr.set_strict_mode(True)
     rig = load_rig(installation / "rig.yaml")
     results = list(track_rig(rig, packets=True))
-    recorder = Recorder(rig, None, viewer="rerun+http://127.0.0.1:1/proxy", layout="superintendent")
-    recorder._view.set_sinks(rr.FileSink(tmp_path / "view.rrd"))  # what the viewer would get, into a file
+    view = ViewerFeed((tmp_path / "view.rrd").open("wb"))  # what the viewer gets, into a file (closed with it)
+    recorder = Recorder(rig, None, viewer=view, layout="superintendent")
     recorder.on_update(LiveUpdate(now=results[5].time, results=results[:6]))  # the first layout comes after these
     recorder.on_update(LiveUpdate(now=results[-1].time, results=results[6:]))
     recorder.close()
-    chunks = chunks_by_entity(tmp_path / "view.rrd")
+    # the feed's bytes are a run of whole .rrd streams (one per read of Rerun's binary sink), as `rerun -` reads them
+    subprocess.run([rerun_binary(), "rrd", "merge", str(tmp_path / "view.rrd"), "-o", str(tmp_path / "merged.rrd")],
+                   check=True, capture_output=True, env=rerun_env())
+    chunks = chunks_by_entity(tmp_path / "merged.rrd")
     for cam in recorder.cone_cameras().values():
         times, keys = component_rows(chunks[f"/world/cameras/{cam}/image"], "VideoStream:is_keyframe")
         first = np.argmin(times)

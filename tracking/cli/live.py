@@ -7,6 +7,7 @@ what was recorded under its final names and stops the viewer it started.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -52,6 +53,8 @@ SpeedOption = Annotated[float, typer.Option(help="Replay speed of video files (1
                                             callback=finite(0.0, allow_inf=True))]
 DurationOption = Annotated[float | None, typer.Option(help="Stop after this many seconds of capture time.",
                                                       callback=finite(0.0))]
+LoopOption = Annotated[bool, typer.Option("--loop", help="Replay video files again and again, capture times running "
+                                                         "on, until --duration or Ctrl-C (soak tests).")]
 LayoutOption = Annotated[Layout, typer.Option(help="Layout stored in the recording: superintendent or analysis.")]
 ScopeOption = Annotated[ViewerScope, typer.Option(help="What the viewer (--web, --spawn) of the superintendent's "
                                                        "layout gets: superintendent (what it shows) or all "
@@ -75,6 +78,7 @@ def live(
     segment_minutes: SegmentOption = LIVE_SEGMENT_MIN,
     speed: SpeedOption = 1.0,
     duration: DurationOption = None,
+    loop: LoopOption = False,
     layout: LayoutOption = Layout.SUPERINTENDENT,
     viewer_scope: ScopeOption = ViewerScope.SUPERINTENDENT,
     web_port: WebPortOption = WEB_PORT_DEFAULT,
@@ -92,14 +96,14 @@ def live(
     warn_rig(the_rig)
     rrd, out = _session_files(the_rig, rrd, out)
     fox_address = _check_ports(bind, spawn, web, foxglove, port, grpc_port, web_port)
-    viewer_url, viewer_process = start_live_viewer(web, bind, grpc_port, web_port) if spawn or web else (None, None)
+    viewer_process = start_live_viewer(web, bind, grpc_port, web_port) if spawn or web else None
     if web:
         console.print(f"web viewer: {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}")
     session = LiveSession(the_rig, rrd, out, viewer_process=viewer_process)
     try:
         if fox_address is not None:
             session.fox = _foxglove(the_rig, fox_address, port, warn=not (spawn or web))
-        session.record(speed, duration, viewer_url, segment_minutes * 60, stale, layout, viewer_scope)
+        session.record(speed, duration, segment_minutes * 60, stale, layout, viewer_scope, loop)
     except KeyboardInterrupt:
         err_console.print("stopped")
     finally:
@@ -169,21 +173,26 @@ class LiveSession:
         """Offsets written so far."""
         return self.writer.rows if self.writer is not None else 0
 
-    def record(self, speed: float, duration: float | None, viewer_url: str | None, segment_s: float, stale_s: float,
-               layout: Layout, viewer_scope: ViewerScope) -> None:
-        """Track every camera (video files replayed at speed) until duration s of capture time (None: until stopped)
-        into the recording, in segment_s files and streamed to the viewer at viewer_url, and the offsets CSV."""
+    def record(self, speed: float, duration: float | None, segment_s: float, stale_s: float, layout: Layout,
+               viewer_scope: ViewerScope, loop: bool = False) -> None:
+        """Track every camera (video files replayed at speed, again and again with loop) until duration s of capture
+        time (None: until stopped) into the recording, in segment_s files and streamed to the viewer the tool started
+        (through its stdin, never waited for), and the offsets CSV."""
         from tracking.live import LiveTracker
         from tracking.offsets_csv import OffsetsWriter
+        from viewer.feed import ViewerFeed
         from viewer.session import Recorder
 
-        self.recorder = Recorder(self.rig, self.rrd, viewer=viewer_url, segment_s=segment_s, stale_s=stale_s,
+        feed = None
+        if self.viewer_process is not None and self.viewer_process.stdin is not None:
+            feed = ViewerFeed(self.viewer_process.stdin)
+        self.recorder = Recorder(self.rig, self.rrd, viewer=feed, segment_s=segment_s, stale_s=stale_s,
                                  layout=layout.value, estimate_period_s=LIVE_ESTIMATE_PERIOD_S,
                                  viewer_scope=viewer_scope.value, forward=[self.fox] if self.fox is not None else [])
         with OffsetsWriter(self.outputs.claim(self.out)) as self.writer:
             console.print(f"recording to {self.rrd.with_name(self.rrd.stem + '-*.rrd')} and {self.writer.path} "
                           f"(renamed {self.out.name} when the session ends)", markup=False, soft_wrap=True)
-            with LiveTracker(self.rig, speed=speed) as tracker:
+            with LiveTracker(self.rig, speed=speed, loop_until=math.inf if loop else None) as tracker:
                 console.print(f"live: {len(tracker.names)} cameras; Ctrl-C stops and keeps everything recorded")
                 for e in self._estimates(tracker, duration):
                     self.writer.write(e)
