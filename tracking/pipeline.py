@@ -67,7 +67,8 @@ class Sink(Protocol):
 
     def on_estimate(self, estimate: ConeEstimate) -> None: ...
 
-    def close(self) -> None: ...
+    def close(self, stopped: str = "") -> None:
+        """Finish; stopped: why the run ended before the end of its sources (empty: it ran to its end)."""
 
 
 @dataclass

@@ -127,7 +127,7 @@ class FoxgloveStream:
             else:
                 self.on_frame(item)
 
-    def close(self) -> None:
+    def close(self, stopped: str = "") -> None:
         """The archive's closing messages, then the server stops (its clients are disconnected)."""
         if self.closed:
             return

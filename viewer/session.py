@@ -473,8 +473,8 @@ class Recorder:
             self._cone_cameras = mapping
             self._blueprint_sent = now
 
-    def close(self) -> None:
-        """Final status and flush to disk."""
+    def close(self, stopped: str = "") -> None:
+        """Final status and flush to disk (stopped: the run's early end, which the recording's status has already)."""
         self.flush_estimates()
         self.status.log_if_due(self.rec, self._last_time, force=True)
         if self._last_update is not None:

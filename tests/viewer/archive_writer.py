@@ -1,8 +1,8 @@
 """A writer for the truncation and SIGKILL tests: synthetic frames and estimates into an archive, in real time.
 
-Run as `python -m tests.viewer.archive_writer RIG OUT SECONDS [--forever] [--key PRIVATE.pem]`: SECONDS of
-capture time at 15 FPS per camera (a chunk per second), then close; with --forever it never closes (the test
-kills it) and prints one line per chunk written.
+Run as `python -m tests.viewer.archive_writer RIG OUT SECONDS [--forever] [--key PRIVATE.pem] [--stopped WHY]`:
+SECONDS of capture time at 15 FPS per camera (a chunk per second), then close (as a run that ended early, WHY, with
+--stopped); with --forever it never closes (the test kills it) and prints one line per chunk written.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ T0_NS = 100 * 10**9
 IMAGE_SIZE = (160, 120)
 
 
-def main(rig_path: Path, out: Path, seconds: float, forever: bool, key: Path | None) -> None:
+def main(rig_path: Path, out: Path, seconds: float, forever: bool, key: Path | None, stopped: str = "") -> None:
     rig = load_rig(rig_path)
     cameras = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
     archive = Archive(out, rig, ArchiveInputs.from_rig(rig, {"mode": "synthetic"}), cameras,
@@ -45,10 +45,11 @@ def main(rig_path: Path, out: Path, seconds: float, forever: bool, key: Path | N
             print(f"second {k // FPS}", flush=True)
             time.sleep(0.01)
         k += 1
-    archive.close()
+    archive.close(stopped=stopped)
 
 
 if __name__ == "__main__":
     key_arg = sys.argv[sys.argv.index("--key") + 1] if "--key" in sys.argv else None
+    why = sys.argv[sys.argv.index("--stopped") + 1] if "--stopped" in sys.argv else ""
     main(Path(sys.argv[1]), Path(sys.argv[2]), float(sys.argv[3]), "--forever" in sys.argv,
-         Path(key_arg) if key_arg else None)
+         Path(key_arg) if key_arg else None, why)

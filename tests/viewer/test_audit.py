@@ -160,3 +160,23 @@ def test_writer_killed_with_sigkill_is_recovered(installation: Path, tmp_path: P
         names = {a.name for a in reader.iter_attachments()}
         spans = [m.metadata for m in reader.iter_metadata() if m.name == "time_span"]
     assert {"rig.yaml", "manifest.json"} <= names and spans[0]["recovered"] == "true"
+
+
+def test_an_archive_of_a_stopped_run_says_it_is_incomplete(installation: Path, tmp_path: Path) -> None:
+    """Sealed and signed like a whole one, an interrupted run's archive fails verify with one line saying so: an
+    auditor tells a part of an installation from the whole (the reason is in the signed manifest)."""
+    out, private, public = tmp_path / "part.mcap", tmp_path / "private.pem", tmp_path / "public.pem"
+    key = Ed25519PrivateKey.generate()
+    private.write_bytes(key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                                          serialization.NoEncryption()))
+    public.write_bytes(key.public_key().public_bytes(serialization.Encoding.PEM,
+                                                     serialization.PublicFormat.SubjectPublicKeyInfo))
+    proc = subprocess.run([*WRITER, str(installation / "rig.yaml"), str(out), "2", "--key", str(private),
+                           "--stopped", "stopped by the operator"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    cli = subprocess.run([*TOPSIDE, "verify", str(out), "--key", str(public)], capture_output=True, text=True,
+                         timeout=120)
+    assert cli.returncode != 0
+    assert "FAIL: incomplete: the run that wrote it was stopped by the operator after 1.9 s of capture time; it does " \
+           "not hold the whole installation" in cli.stdout
+    assert "signature valid" in cli.stdout  # intact, only not whole

@@ -118,10 +118,13 @@ class RunLoop:
                         sink.on_estimate(e)
                     self.writer.write(e)
         finally:
-            failing = sys.exc_info()[1] is not None
+            error = sys.exc_info()[1]
+            failing = error is not None
+            stopped = "" if error is None else "stopped by the operator" if isinstance(error, KeyboardInterrupt) \
+                else f"stopped by an error: {one_line(error)}"
             for sink in self.sinks:
                 try:
-                    sink.close()
+                    sink.close(stopped)
                 except Exception:
                     if not failing:
                         raise

@@ -445,6 +445,11 @@ def verify(path: Path, key: Ed25519PublicKey | None = None) -> Report:
         errors += [f"manifest: {m}" for m in compare(manifest, s.digests)]
         if manifest.get("recovered"):
             notes.append(f"recovered file: {manifest['recovered'].get('note', '')}")
+        if manifest.get("stopped"):  # sealed whole, but the run that wrote it ended before its sources did
+            span = f" after {(s.last_ns - s.first_ns) / NS:.1f} s of capture time" if s.first_ns is not None and \
+                s.last_ns is not None else ""
+            errors.append(f"incomplete: the run that wrote it was {manifest['stopped']}{span}; it does not hold the "
+                          "whole installation")
         sig = s.attachment(SIGNATURE_NAME)
         if sig is not None and key is None:
             signature = "unchecked"

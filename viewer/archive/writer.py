@@ -232,8 +232,9 @@ class Archive:
                 transform("jacket", f"{FILTER_FRAME_PREFIX}{name}", as_f32_pose(T), ns)
                 for name, T in sorted(estimate.T_jacket_cameras.items())]), ns)
 
-    def close(self, offsets_csv: bytes | None = None) -> dict:
-        """Remaining truth, the time span, the offsets CSV, then the manifest and summary. Returns the manifest."""
+    def close(self, offsets_csv: bytes | None = None, stopped: str = "") -> dict:
+        """Remaining truth, the time span, the offsets CSV, then the manifest and summary. Returns the manifest.
+        stopped: why the run ended before the end of its sources; the manifest (signed) and time_span say so."""
         if self.file.last_ns is not None:
             self._advance(self.file.last_ns)
             for t_ns, cone, v in self._truth[self._truth_next:]:
@@ -243,9 +244,10 @@ class Archive:
         self.file.flush()
         if offsets_csv is not None:
             self.file.attach("offsets.csv", "text/csv", offsets_csv, log_time=self.file.last_ns or 0)
-        self.file.metadata("time_span", time_span(self.file.first_ns, self.file.last_ns,
-                                                  {f"frames_{k}": str(v) for k, v in sorted(self._frames.items())}))
-        return self.file.close()
+        extra = {f"frames_{k}": str(v) for k, v in sorted(self._frames.items())} | ({"stopped": stopped} if stopped
+                                                                                    else {})
+        self.file.metadata("time_span", time_span(self.file.first_ns, self.file.last_ns, extra))
+        return self.file.close(**({"stopped": stopped} if stopped else {}))
 
 class ArchiveSink:
     """Recorder-like sink (on_frame, on_estimate, close) that writes an MCAP archive from the tracker's stream."""
@@ -275,7 +277,7 @@ class ArchiveSink:
         """Archive one cone estimate."""
         self.archive.estimate(estimate)
 
-    def close(self) -> None:
-        """Attach the offsets CSV if it was written, then seal the file."""
+    def close(self, stopped: str = "") -> None:
+        """Attach the offsets CSV if it was written, then seal the file (stopped: the run's early end, said in it)."""
         csv = self.offsets_csv.read_bytes() if self.offsets_csv is not None and self.offsets_csv.is_file() else None
-        self.archive.close(csv)
+        self.archive.close(csv, stopped)
