@@ -156,6 +156,7 @@ def plan_video(rig: Rig, entry: CameraEntry, chunk_frames: int = CHUNK_FRAMES) -
     return VideoPlan(entry.name, tuple(chunks), health, n)
 
 
+EXIT_ORPHANED = 70  # a worker whose parent died ends with this status (nobody reads it)
 _RIGS: dict[tuple[str, float], Rig] = {}
 
 
@@ -265,9 +266,21 @@ def ready(_: object = None) -> str:
 
 def _worker_init() -> None:
     """A worker process: one thread for OpenCV, and it ends with its parent."""
+    import multiprocessing as mp
+    import threading
+
     import cv2
 
     cv2.setNumThreads(1)
+    parent = mp.parent_process()
+    if parent is not None:
+        threading.Thread(target=_end_with, args=(parent,), daemon=True, name="end-with-parent").start()
+
+
+def _end_with(parent: Any) -> None:
+    """Wait on the parent's sentinel; once it is gone (killed: nobody will read the results), end this worker."""
+    parent.join()
+    os._exit(EXIT_ORPHANED)
 
 
 class LocalPool:

@@ -252,3 +252,38 @@ def test_a_times_file_stamps_every_frame_in_chunks_as_in_one_pass(clip: Path, tm
     for stats in (one_stats, chunk_stats):
         assert all(v.unlisted == 1 for v in stats.videos.values())
         assert all("without a time in the times file" in line for line in stats.warnings())
+
+
+def test_workers_end_when_track_is_killed(clip: Path, tmp_path: Path) -> None:
+    """`kill -9` of `track --workers 2` leaves no process behind: the workers (and the resource tracker they hold
+    open) see their parent gone and end."""
+    import os
+    import signal
+    import time
+
+    proc = subprocess.Popen([*TOPSIDE, "track", "--rig", str(clip / "rig.yaml"), "-o", str(tmp_path / "o.csv"),
+                             "--workers", "2"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def children() -> list[int]:
+        out = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout
+        return [int(p) for p in out.split()]
+
+    deadline = time.monotonic() + 30
+    while len(children()) < 3 and time.monotonic() < deadline and proc.poll() is None:  # tracker and two workers
+        time.sleep(0.1)
+    kids = children()
+    assert len(kids) >= 3 and proc.poll() is None
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=10)
+
+    def alive(pid: int) -> bool:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return not open(f"/proc/{pid}/stat").read().split(")")[-1].split()[0] == "Z"
+
+    deadline = time.monotonic() + 15
+    while any(alive(p) for p in kids) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not [p for p in kids if alive(p)]
