@@ -194,6 +194,12 @@ CASES = [
     Case("live --stale nan", ["live", *RIG, "--stale", "nan"], ("--stale",)),
     Case("live over an earlier session", ["live", *RIG, "--rrd", "s.rrd", "-o", "s.csv"], ("s.csv", "earlier"),
          write("s.csv", "time,cone\n")),
+    Case("live with a missing video", ["live", "--rig", "bad-rig.yaml"], ("nope.mp4", "not found"),
+         use_source("nope.mp4")),
+    Case("live with a video that is not one", ["live", "--rig", "bad-rig.yaml"], ("truth.csv", "video"),
+         use_source("truth.csv")),
+    Case("live mixing files and a device", ["live", "--rig", "bad-rig.yaml"], ("bad-rig.yaml", "mixes"),
+         use_source("0")),
     # sync, survey
     Case("sync -o the rig", ["sync", *RIG, "-o", "rig.yaml"], ("rig.yaml", "--out")),
     Case("sync --reference unknown", ["sync", *RIG, "-o", "s.yaml", "--reference", "nope"], ("nope", "--reference")),

@@ -21,7 +21,7 @@ import numpy as np
 
 from tracking.errors import InputError
 from tracking.frame_times import FrameClock
-from tracking.images import Frame, VideoHealth, decoded_frames, frames, open_video, to_the_end
+from tracking.images import Frame, VideoHealth, decoded_frames, frames, is_image, open_video, to_the_end
 from tracking.rig import CameraEntry, Rig
 
 STREAM_PREFIXES = ("rtsp:", "rtsps:", "http:", "https:", "udp:", "tcp:", "srt:")
@@ -77,6 +77,20 @@ def uses_wall_clock(rig: Rig) -> bool:
         raise InputError(rig.path, "mixes video files with live devices or streams (their clocks differ; "
                                    "expected all files or all live)", "cameras.source")
     return kinds == {True}
+
+
+def check_sources(rig: Rig) -> None:
+    """Before a live session writes anything: live and file sources not mixed, and every file a readable image or
+    video (a one-line error naming it), as `track` requires."""
+    uses_wall_clock(rig)
+    for entry in rig.cameras:
+        if source_kind(entry.source) != SourceKind.FILE:
+            continue
+        path = rig.resolve(entry.source)
+        if not path.is_file():
+            raise InputError(path, "image or video not found")
+        if not is_image(path):
+            open_video(path).close()
 
 
 @dataclass

@@ -88,12 +88,14 @@ def live(
 ) -> None:
     """Track every camera live, fuse them, record, and stream to the superintendent's view (and Foxglove)."""
     from tracking.rig import load_rig
+    from tracking.sources import check_sources
     from viewer.playback import resolve_bind, start_live_viewer, web_viewer_url
 
     if spawn and web:
         raise InputError("--spawn/--web", "choose one viewer")
     the_rig = load_rig(rig)
     warn_rig(the_rig)
+    check_sources(the_rig)  # a missing or unreadable video, or files mixed with devices: refused before any file
     rrd, out = _session_files(the_rig, rrd, out)
     fox_address = _check_ports(bind, spawn, web, foxglove, port, grpc_port, web_port)
     viewer_process = start_live_viewer(web, bind, grpc_port, web_port) if spawn or web else None
