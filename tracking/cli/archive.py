@@ -72,6 +72,10 @@ def export(
     settings = ArchiveSettings.read(key, vessel, operator, video)
     if offsets is not None and not offsets.is_file():
         raise InputError(offsets, "offsets CSV not found", "--offsets")
+    if offsets is not None:  # what is signed into the archive as offsets.csv must be one
+        from tracking.evaluate import read_offsets
+
+        read_offsets(offsets)
     with atomic_path(mcap) as partial:
         n = export_recording(recording, partial, settings.metadata, settings.private,
                              offsets.read_bytes() if offsets else None, settings.video.value)
