@@ -8,6 +8,8 @@ replaced by ChannelWriter, which publishes each message on a channel of the same
 
 from __future__ import annotations
 
+import logging
+import sys
 from collections.abc import Mapping
 
 import foxglove
@@ -25,6 +27,36 @@ from viewer.archive import Archive, ArchiveInputs, frame_view
 
 DEFAULT_PORT = 8765  # Foxglove's own default for a WebSocket connection
 SERVER_NAME = "topside"
+LOG_CHARS = 300  # a Foxglove log line is cut to this: a client's malformed message is not copied to the terminal
+LOG_LEVEL = logging.WARNING  # the server's own notices (clients come and go) stay out of the operator's terminal
+
+
+class _BoundedLine(logging.Formatter):
+    """One line of at most LOG_CHARS characters, named as the server's."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = " ".join(record.getMessage().split())
+        return f"topside: foxglove: {record.levelname.lower()}: " + (
+            text if len(text) <= LOG_CHARS else f"{text[:LOG_CHARS]}… ({len(text)} characters)")
+
+
+class _Stderr(logging.Handler):
+    """Writes to whatever sys.stderr is when a line comes (not the stream it was at start)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        sys.stderr.write(self.format(record) + "\n")
+
+
+def _bounded_foxglove_log() -> None:
+    """Route foxglove-sdk's log (Python logging, logger "foxglove") to stderr as bounded single lines, once."""
+    logger = logging.getLogger("foxglove")
+    if any(isinstance(h.formatter, _BoundedLine) for h in logger.handlers):
+        return
+    handler = _Stderr()
+    handler.setFormatter(_BoundedLine())
+    logger.addHandler(handler)
+    logger.setLevel(LOG_LEVEL)
+    logger.propagate = False
 LATCHED_SUFFIXES = ("/calibration", "/frames/markers", "/log")  # a client that subscribes gets the newest message at
 # once: calibration and marker frames are state (the archive repeats them only every second of capture time), and the
 # newest log line tells a late client where the session stands (a channel is advertised only once it has a message)
@@ -97,6 +129,7 @@ class FoxgloveStream:
     def __init__(self, rig: Rig, address: str, port: int = DEFAULT_PORT, options: Mapping[str, str] | None = None,
                  cameras: Mapping[str, CameraModel] | None = None) -> None:
         self.rig = rig
+        _bounded_foxglove_log()
         self.context = foxglove.Context()
         self.writer = ChannelWriter(self.context)
         self.server = foxglove.start_server(name=f"{SERVER_NAME} {rig.name}", host=address, port=port,

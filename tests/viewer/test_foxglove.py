@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 import websockets
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
@@ -200,3 +201,24 @@ def test_a_client_that_joins_late_gets_the_newest_log_line_and_calibration(insta
     assert decoded["foxglove.Log"].message == "cone A: TRACKING"  # where the session stands, with its own time
     assert decoded["foxglove.Log"].timestamp.seconds == 1
     assert decoded["foxglove.CameraCalibration"].frame_id == camera
+
+
+def test_a_malformed_client_message_is_one_bounded_line(installation: Path, capfd: pytest.CaptureFixture) -> None:
+    """A client's 100 kB malformed message is named in one line on stderr, cut short, not copied to the terminal."""
+    import json
+
+    stream = FoxgloveStream(load_rig(installation / "rig.yaml"), "127.0.0.1", port=0)
+
+    async def send() -> None:
+        async with websockets.connect(f"ws://127.0.0.1:{stream.port}", subprotocols=[SUBPROTOCOL],
+                                      max_size=None) as ws:
+            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": "x" * 100_000}]}))
+            await asyncio.sleep(1.0)
+
+    try:
+        asyncio.run(send())
+    finally:
+        stream.close()
+    lines = [line for line in capfd.readouterr().err.splitlines() if "foxglove" in line]
+    assert any("Invalid message" in line for line in lines)
+    assert all(len(line) < 400 for line in lines)
