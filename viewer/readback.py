@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
+from rerun.error_utils import RerunWarning
 
 
 def chunks_by_entity(rrd: Path) -> dict[str, list[rr.chunk.Chunk]]:
     """All chunks of the recording in an .rrd file, grouped by entity path."""
     out: dict[str, list[rr.chunk.Chunk]] = {}
-    for chunk in rr.chunk.RrdReader(rrd).store().stream().to_chunks():
+    with warnings.catch_warnings():  # a file without footer (cut, or still being written) reads on: what it holds
+        warnings.simplefilter("ignore", RerunWarning)  # counts, and a caller names a cut file in its own words
+        reader = rr.chunk.RrdReader(rrd)
+    for chunk in reader.store().stream().to_chunks():
         out.setdefault(chunk.entity_path, []).append(chunk)
     return out
 
