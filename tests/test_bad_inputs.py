@@ -4,6 +4,7 @@ option, no traceback, every input byte-identical afterwards, and no output (temp
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import shutil
 import subprocess
 import sys
@@ -30,6 +31,7 @@ class Case:
     args: list[str]
     names: tuple[str, ...]  # fragments the error line must hold (the file, the field or option)
     prepare: Callable[[Path], None] | None = None
+    marks: tuple = ()  # pytest marks (a case that holds only when a package is not installed)
 
 
 def edit_rig(change: Callable[[dict], None], to: str = "bad-rig.yaml") -> Callable[[Path], None]:
@@ -50,6 +52,18 @@ def write(name: str, data: bytes | str) -> Callable[[Path], None]:
         path = folder / name
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(data if isinstance(data, bytes) else data.encode())
+
+    return prepare
+
+
+def recording(name: str) -> Callable[[Path], None]:
+    """A preparation writing a small real Rerun recording (capture times 0-4 s), in its own process."""
+
+    def prepare(folder: Path) -> None:
+        script = ("import rerun as rr, sys\nrr.init('t')\nrr.save(sys.argv[1])\n"
+                  "for i in range(5):\n    rr.set_time('capture', timestamp=float(i))\n"
+                  "    rr.log('x', rr.Scalars(float(i)))\n")
+        subprocess.run([sys.executable, "-c", script, str(folder / name)], check=True, timeout=60)
 
     return prepare
 
@@ -169,6 +183,19 @@ CASES = [
     Case("view a PNG", ["view", "png.rrd", "--web"], ("png.rrd",), write("png.rrd", PNG)),
     Case("view --to before --from", ["view", "png.rrd", "--from", "5", "--to", "1"], ("--to",),
          write("png.rrd", PNG)),
+    Case("view --from nan", ["view", "r.rrd", "--web", "--from", "nan"], ("--from", "not a finite number"),
+         recording("r.rrd")),
+    Case("view --to nan", ["view", "r.rrd", "--web", "--to", "nan"], ("--to", "not a finite number"),
+         recording("r.rrd")),
+    Case("view --from inf", ["view", "r.rrd", "--web", "--from", "inf"], ("--from", "not a finite number"),
+         recording("r.rrd")),
+    # track --ray
+    Case("track --ray ray:// without ray[client]", ["track", *RIG, "--ray", "ray://HOST:10001"],
+         ("--ray", "ray://HOST:10001", "pip install 'ray[client]'"),
+         marks=(pytest.mark.skipif(importlib.util.find_spec("grpc") is not None, reason="ray[client] is installed"),)),
+    Case("track --ray malformed", ["track", *RIG, "--ray", "ray://host:port"], ("--ray", "ray://host:port",
+                                                                               "expected ray://HOST:PORT")),
+    Case("track --ray no port", ["track", *RIG, "--ray", "nonsense"], ("--ray", "nonsense", "not a Ray address")),
     # evaluate
     Case("evaluate without truth", ["evaluate", "offsets.csv"], ("offsets.csv",),
          write("offsets.csv", offsets_csv())),
@@ -235,7 +262,7 @@ def test_at_least_forty_cases_cover_every_command() -> None:
     assert len({c.name for c in CASES}) == len(CASES)
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", [pytest.param(c, id=c.name, marks=c.marks) for c in CASES])
 def test_bad_input(case: Case, installation: Path, tmp_path: Path) -> None:
     folder = tmp_path / "work"
     shutil.copytree(installation, folder)
