@@ -126,6 +126,8 @@ CASES = [
     Case("track --mode unknown", ["track", *RIG, "--mode", "best"], ("--mode", "best")),
     Case("track --video unknown", ["track", *RIG, "--mcap", "a.mcap", "--video", "gif"], ("--video", "gif")),
     Case("track --key not a key", ["track", *RIG, "--mcap", "a.mcap", "--key", "truth.csv"], ("truth.csv",)),
+    Case("track --key without --mcap", ["track", *RIG, "--key", "k.pem"], ("--key", "k.pem", "--mcap"),
+         write("k.pem", "not read: there is no archive to sign\n")),
     # track: bad rigs and what they point to
     Case("rig with a NaN centre", ["track", "--rig", "bad-rig.yaml"], ("bad-rig.yaml", "center"),
          edit_rig(nan_centre)),
