@@ -239,6 +239,9 @@ CASES = [
     Case("sync -o the rig", ["sync", *RIG, "-o", "rig.yaml"], ("rig.yaml", "--out")),
     Case("sync --reference unknown", ["sync", *RIG, "-o", "s.yaml", "--reference", "nope"], ("nope", "--reference")),
     Case("survey --to before --from", ["survey", *RIG, "-o", "s.yaml", "--from", "4", "--to", "2"], ("--to",)),
+    Case("survey --from nan", ["survey", *RIG, "-o", "s.yaml", "--from", "nan"], ("--from", "not a finite number")),
+    Case("survey --to nan", ["survey", *RIG, "-o", "s.yaml", "--to", "nan"], ("--to", "not a finite number")),
+    Case("survey --to inf", ["survey", *RIG, "-o", "s.yaml", "--to", "inf"], ("--to", "not a finite number")),
     Case("survey without survey_sigma", ["survey", *RIG, "-o", "s.yaml"], ("rig.yaml", "survey_sigma")),
 ]
 
