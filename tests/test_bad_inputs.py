@@ -286,3 +286,26 @@ def test_bad_input(case: Case, installation: Path, tmp_path: Path) -> None:
     for fragment in case.names:
         assert fragment in lines[0], lines[0]
     assert snapshot(folder) == before  # inputs unchanged, nothing written, nothing half-written
+
+
+@pytest.mark.parametrize(("pairs", "does"), [(True, "marker 4 is tracked for cone A, as pairs says"),
+                                             (False, "marker 4 is in no pair, so it gives no offset")])
+def test_a_marker_on_a_cone_not_in_cones_is_warned_of(pairs: bool, does: str, installation: Path,
+                                                      tmp_path: Path) -> None:
+    """A marker whose cone is not in `cones` (and no pair's): track says what it did with it, in one warning line."""
+    folder = tmp_path / "work"
+    shutil.copytree(installation, folder)
+
+    def change(rig: dict) -> None:
+        rig["markers"][3]["cone"] = "B"  # marker 4, the port face's topside marker
+        if not pairs:
+            del rig["pairs"]
+
+    edit_rig(change)(folder)
+    proc = subprocess.run([*TOPSIDE, "track", "--rig", "bad-rig.yaml", "--workers", "1"], cwd=folder,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    warned = [line for line in proc.stderr.splitlines() if "markers[3].cone" in line]
+    assert warned == [f"topside: warning: bad-rig.yaml: markers[3].cone: B is not in cones, and no pair is on it; "
+                      f"{does}"], proc.stderr

@@ -39,7 +39,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from tracking.errors import InputError, read_yaml
+from tracking.errors import InputError, one_line, read_yaml
 from tracking.frame_times import FrameClock, read_frame_times
 from tracking.geometry import nearest_rotation, quaternion_rotation, transform
 from tracking.outputs import write_text
@@ -435,6 +435,7 @@ def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
     elif tipless:
         out.append(f"{path}: cones: no tip for {', '.join(tipless)}; reported at the topside marker's centre, "
                    "not at the cone tip")
+    out += _markers_off_cones(path, rig, paired)
     loose = [c for c in rig.cameras if (c.time_offset_sigma or 0.0) > WARN_CLOCK_SIGMA_S]
     if loose:
         worst = max(c.time_offset_sigma or 0.0 for c in loose)
@@ -450,6 +451,23 @@ def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
                    "offsets' σ grows by what such errors do at each cone (a marker's tilt turns the topside's pose), "
                    "and cones may be withheld: refine them with topside survey, or survey the markers better")
     return tuple(out)
+
+
+def _markers_off_cones(path: Path, rig: Rig, paired: list[str]) -> list[str]:
+    """When `cones` is given, a line per marker whose cone is neither in it nor a pair's (a pair's cone without a tip
+    has its own warning): what the tracker does with it, which is not to report an offset at that cone."""
+    if not rig.cones:
+        return []
+    out = []
+    pairs = rig.all_pairs()
+    for i, m in enumerate(rig.markers):
+        if m.cone in rig.cones or m.cone in paired:
+            continue
+        its = sorted({p.cone for p in pairs if m.id in (p.jacket, p.topside)})
+        does = (f"marker {m.id} is tracked for cone {', '.join(its)}, as pairs says" if its else
+                f"marker {m.id} is in no pair, so it gives no offset")
+        out.append(one_line(f"{path}: markers[{i}].cone: {m.cone} is not in cones, and no pair is on it; {does}"))
+    return out
 
 
 def load_rig(path: str | Path) -> Rig:
