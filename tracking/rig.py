@@ -138,12 +138,43 @@ MarkerSigmaM = Annotated[Number, Field(ge=0, le=MAX_MARKER_SIGMA_M)]
 MarkerSigmaDeg = Annotated[Number, Field(ge=0, le=MAX_MARKER_SIGMA_DEG)]
 
 
+def _one_or_three(high: float, unit: str) -> BeforeValidator:
+    """Checks a σ given as one number or three before pydantic's union of the two does: its error would name the
+    union's members by their validators' internals (function reprs, memory addresses); this one says what is
+    expected."""
+
+    def within(v: Any) -> bool:
+        try:  # what pydantic reads as a number (a numeric string too), but not a YAML boolean
+            return not isinstance(v, bool) and 0 <= float(v) <= high
+        except (TypeError, ValueError):
+            return False
+
+    def check(value: Any) -> Any:
+        items = value if isinstance(value, list) else [value]
+        if len(items) != (3 if isinstance(value, list) else 1) or not all(within(v) for v in items):
+            got = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
+            raise ValueError(f"expected a σ from 0 to {high:g} {unit}, or three (one per body axis), got {got}")
+        return value
+
+    return BeforeValidator(check)
+
+
 class SurveySigma(_Model):
     """How well markers' poses in their bodies' frames are known: 1σ of a centre (m) and of a rotation about each axis
     (degrees), body frame; one number for every axis or one per axis."""
 
-    position_m: MarkerSigmaM | Annotated[list[MarkerSigmaM], Field(min_length=3, max_length=3)] = 0.0
-    tilt_deg: MarkerSigmaDeg | Annotated[list[MarkerSigmaDeg], Field(min_length=3, max_length=3)] = 0.0
+    position_m: Annotated[MarkerSigmaM | Annotated[list[MarkerSigmaM], Field(min_length=3, max_length=3)],
+                          _one_or_three(MAX_MARKER_SIGMA_M, "m")] = 0.0
+    tilt_deg: Annotated[MarkerSigmaDeg | Annotated[list[MarkerSigmaDeg], Field(min_length=3, max_length=3)],
+                        _one_or_three(MAX_MARKER_SIGMA_DEG, "degrees")] = 0.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _a_mapping(cls, value: Any) -> Any:
+        if not isinstance(value, dict | SurveySigma):
+            got = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
+            raise ValueError(f"expected a mapping with position_m (m) and tilt_deg (degrees), got {got}")
+        return value
 
     def position(self) -> np.ndarray:
         """(3,) σ of the centre along the body's axes, m."""
