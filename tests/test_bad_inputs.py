@@ -4,6 +4,7 @@ option, no traceback, every input byte-identical afterwards, and no output (temp
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import shutil
 import subprocess
 import sys
@@ -30,6 +31,7 @@ class Case:
     args: list[str]
     names: tuple[str, ...]  # fragments the error line must hold (the file, the field or option)
     prepare: Callable[[Path], None] | None = None
+    marks: tuple = ()  # pytest marks (a case that holds only when a package is not installed)
 
 
 def edit_rig(change: Callable[[dict], None], to: str = "bad-rig.yaml") -> Callable[[Path], None]:
@@ -50,6 +52,18 @@ def write(name: str, data: bytes | str) -> Callable[[Path], None]:
         path = folder / name
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(data if isinstance(data, bytes) else data.encode())
+
+    return prepare
+
+
+def recording(name: str) -> Callable[[Path], None]:
+    """A preparation writing a small real Rerun recording (capture times 0-4 s), in its own process."""
+
+    def prepare(folder: Path) -> None:
+        script = ("import rerun as rr, sys\nrr.init('t')\nrr.save(sys.argv[1])\n"
+                  "for i in range(5):\n    rr.set_time('capture', timestamp=float(i))\n"
+                  "    rr.log('x', rr.Scalars(float(i)))\n")
+        subprocess.run([sys.executable, "-c", script, str(folder / name)], check=True, timeout=60)
 
     return prepare
 
@@ -112,6 +126,8 @@ CASES = [
     Case("track --mode unknown", ["track", *RIG, "--mode", "best"], ("--mode", "best")),
     Case("track --video unknown", ["track", *RIG, "--mcap", "a.mcap", "--video", "gif"], ("--video", "gif")),
     Case("track --key not a key", ["track", *RIG, "--mcap", "a.mcap", "--key", "truth.csv"], ("truth.csv",)),
+    Case("track --key without --mcap", ["track", *RIG, "--key", "k.pem"], ("--key", "k.pem", "--mcap"),
+         write("k.pem", "not read: there is no archive to sign\n")),
     # track: bad rigs and what they point to
     Case("rig with a NaN centre", ["track", "--rig", "bad-rig.yaml"], ("bad-rig.yaml", "center"),
          edit_rig(nan_centre)),
@@ -119,6 +135,15 @@ CASES = [
          edit_rig(lambda rig: rig.update(marker_size=-1.0))),
     Case("rig with an infinite time offset", ["track", "--rig", "bad-rig.yaml"], ("bad-rig.yaml", "time_offset"),
          edit_rig(lambda rig: rig["cameras"][1].update(time_offset=float("inf")))),
+    Case("rig with a key given twice", ["track", "--rig", "bad-rig.yaml"],
+         ("bad-rig.yaml", "line 70", "duplicate key 'marker_size', first given on line 3"),
+         lambda f: (f / "bad-rig.yaml").write_text((f / "rig.yaml").read_text() + "marker_size: 0.5\n")),
+    Case("rig with a negative survey_sigma", ["track", "--rig", "bad-rig.yaml"],
+         ("bad-rig.yaml", "survey_sigma.position_m", "expected a σ from 0 to 1 m, or three", "got [-0.01"),
+         edit_rig(lambda rig: rig.update(survey_sigma={"position_m": [-0.01, 0.01, 0.01], "tilt_deg": 1.0}))),
+    Case("rig with a survey_sigma that is a number", ["track", "--rig", "bad-rig.yaml"],
+         ("bad-rig.yaml", "survey_sigma", "expected a mapping with position_m (m) and tilt_deg (degrees)"),
+         edit_rig(lambda rig: rig.update(survey_sigma=-0.01))),
     Case("rig that is binary", ["track", "--rig", "bin.yaml"], ("bin.yaml",), write("bin.yaml", BINARY)),
     Case("rig that is empty", ["track", "--rig", "empty.yaml"], ("empty.yaml",), write("empty.yaml", "")),
     Case("rig that is a folder", ["track", "--rig", "calibration"], ("calibration",)),
@@ -169,6 +194,19 @@ CASES = [
     Case("view a PNG", ["view", "png.rrd", "--web"], ("png.rrd",), write("png.rrd", PNG)),
     Case("view --to before --from", ["view", "png.rrd", "--from", "5", "--to", "1"], ("--to",),
          write("png.rrd", PNG)),
+    Case("view --from nan", ["view", "r.rrd", "--web", "--from", "nan"], ("--from", "not a finite number"),
+         recording("r.rrd")),
+    Case("view --to nan", ["view", "r.rrd", "--web", "--to", "nan"], ("--to", "not a finite number"),
+         recording("r.rrd")),
+    Case("view --from inf", ["view", "r.rrd", "--web", "--from", "inf"], ("--from", "not a finite number"),
+         recording("r.rrd")),
+    # track --ray
+    Case("track --ray ray:// without ray[client]", ["track", *RIG, "--ray", "ray://HOST:10001"],
+         ("--ray", "ray://HOST:10001", "pip install 'ray[client]'"),
+         marks=(pytest.mark.skipif(importlib.util.find_spec("grpc") is not None, reason="ray[client] is installed"),)),
+    Case("track --ray malformed", ["track", *RIG, "--ray", "ray://host:port"], ("--ray", "ray://host:port",
+                                                                               "expected ray://HOST:PORT")),
+    Case("track --ray no port", ["track", *RIG, "--ray", "nonsense"], ("--ray", "nonsense", "not a Ray address")),
     # evaluate
     Case("evaluate without truth", ["evaluate", "offsets.csv"], ("offsets.csv",),
          write("offsets.csv", offsets_csv())),
@@ -210,6 +248,9 @@ CASES = [
     Case("sync -o the rig", ["sync", *RIG, "-o", "rig.yaml"], ("rig.yaml", "--out")),
     Case("sync --reference unknown", ["sync", *RIG, "-o", "s.yaml", "--reference", "nope"], ("nope", "--reference")),
     Case("survey --to before --from", ["survey", *RIG, "-o", "s.yaml", "--from", "4", "--to", "2"], ("--to",)),
+    Case("survey --from nan", ["survey", *RIG, "-o", "s.yaml", "--from", "nan"], ("--from", "not a finite number")),
+    Case("survey --to nan", ["survey", *RIG, "-o", "s.yaml", "--to", "nan"], ("--to", "not a finite number")),
+    Case("survey --to inf", ["survey", *RIG, "-o", "s.yaml", "--to", "inf"], ("--to", "not a finite number")),
     Case("survey without survey_sigma", ["survey", *RIG, "-o", "s.yaml"], ("rig.yaml", "survey_sigma")),
 ]
 
@@ -235,7 +276,7 @@ def test_at_least_forty_cases_cover_every_command() -> None:
     assert len({c.name for c in CASES}) == len(CASES)
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", [pytest.param(c, id=c.name, marks=c.marks) for c in CASES])
 def test_bad_input(case: Case, installation: Path, tmp_path: Path) -> None:
     folder = tmp_path / "work"
     shutil.copytree(installation, folder)
@@ -251,3 +292,26 @@ def test_bad_input(case: Case, installation: Path, tmp_path: Path) -> None:
     for fragment in case.names:
         assert fragment in lines[0], lines[0]
     assert snapshot(folder) == before  # inputs unchanged, nothing written, nothing half-written
+
+
+@pytest.mark.parametrize(("pairs", "does"), [(True, "marker 4 is tracked for cone A, as pairs says"),
+                                             (False, "marker 4 is in no pair, so it gives no offset")])
+def test_a_marker_on_a_cone_not_in_cones_is_warned_of(pairs: bool, does: str, installation: Path,
+                                                      tmp_path: Path) -> None:
+    """A marker whose cone is not in `cones` (and no pair's): track says what it did with it, in one warning line."""
+    folder = tmp_path / "work"
+    shutil.copytree(installation, folder)
+
+    def change(rig: dict) -> None:
+        rig["markers"][3]["cone"] = "B"  # marker 4, the port face's topside marker
+        if not pairs:
+            del rig["pairs"]
+
+    edit_rig(change)(folder)
+    proc = subprocess.run([*TOPSIDE, "track", "--rig", "bad-rig.yaml", "--workers", "1"], cwd=folder,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    warned = [line for line in proc.stderr.splitlines() if "markers[3].cone" in line]
+    assert warned == [f"topside: warning: bad-rig.yaml: markers[3].cone: B is not in cones, and no pair is on it; "
+                      f"{does}"], proc.stderr

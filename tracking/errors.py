@@ -78,12 +78,33 @@ def read_text(path: Path, what: str) -> str:
     return data.decode("utf-8")
 
 
+class UniqueKeyLoader(yaml.SafeLoader):
+    """yaml.SafeLoader refusing a mapping that gives a key twice (PyYAML keeps the last, silently): a rig with
+    marker_size twice is a typo, not a choice. Merge keys (<<) still merge, and a key given after them overrides."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=True)
+            try:
+                first = seen.get(key)
+            except TypeError:  # an unhashable key: SafeLoader's own error names it
+                break
+            if first is not None:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}, first given on line {first}", key_node.start_mark)
+            seen[key] = key_node.start_mark.line + 1
+        return super().construct_mapping(node, deep=deep)
+
+
 def read_yaml(path: Path, what: str = "YAML file") -> Any:
     """A YAML file's content; a one-line InputError naming the line when it is not valid YAML, and naming the file
     when it is missing, a folder, unreadable, empty, binary or too large."""
     text = read_text(Path(path), what)
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=UniqueKeyLoader)  # a SafeLoader
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark else "YAML"

@@ -12,8 +12,10 @@ B-frames, not a file) is one chunk.
 from __future__ import annotations
 
 import heapq
+import importlib.util
 import math
 import os
+import re
 import resource
 import time
 from collections import deque
@@ -35,6 +37,8 @@ CHUNK_FRAMES = 150  # a chunk starts at the first keyframe this many frames or m
 # (10 s at 15 FPS): long enough that the overhead of a chunk and of a Ray task is amortised, short enough that the
 # workers share the last chunks of a video evenly (benchmarks/results/scale.md)
 RAY_INSTALL = "pip install 'topside[cluster]'"  # what `--ray` says when Ray is not installed
+RAY_CLIENT_INSTALL = "pip install 'ray[client]'"  # what a ray:// address says when Ray's client is not installed
+RAY_ADDRESS = re.compile(r"(?P<client>ray://)?(?P<host>[A-Za-z0-9._-]+|\[[0-9A-Fa-f:.]+\])(:(?P<port>[0-9]{1,5}))?")
 
 
 @dataclass(frozen=True)
@@ -338,6 +342,21 @@ class RayRunner:
             self.ray.shutdown()
 
 
+def check_ray_address(address: str) -> None:
+    """A one-line InputError unless address is one Ray can take: '' or 'local' (a Ray started here), 'auto',
+    ray://HOST[:PORT] (a cluster through Ray's client, which needs ray[client]) or HOST:PORT (a cluster's GCS)."""
+    if address in ("", "local", "auto"):
+        return
+    match = RAY_ADDRESS.fullmatch(address)
+    port = match and match["port"]
+    if not match or (port and not 1 <= int(port) <= 65535) or (not match["client"] and not port):
+        raise InputError("--ray", f"{address!r} is not a Ray address (expected ray://HOST:PORT, HOST:PORT, auto, "
+                                  "or nothing for a Ray started here)")
+    if match["client"] and importlib.util.find_spec("grpc") is None:  # Ray's own test of its client's dependencies
+        raise InputError("--ray", f"{address} needs Ray's client, which is not installed (install it with: "
+                                  f"{RAY_CLIENT_INSTALL})")
+
+
 def import_ray() -> Any:
     """The ray module, or a one-line InputError saying how to install it."""
     try:
@@ -351,6 +370,7 @@ def runner(workers: int | None = None, ray_address: str | None = None) -> InPlac
     """Where the chunks run: Ray when an address is given ('' for a local Ray), else `workers` local processes (None:
     every core; 1: this process)."""
     if ray_address is not None:
+        check_ray_address(ray_address)
         return RayRunner(ray_address, workers)
     workers = workers or os.cpu_count() or 1
     return InPlace() if workers == 1 else LocalPool(workers)

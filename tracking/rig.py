@@ -39,7 +39,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from tracking.errors import InputError, read_yaml
+from tracking.errors import InputError, one_line, read_yaml
 from tracking.frame_times import FrameClock, read_frame_times
 from tracking.geometry import nearest_rotation, quaternion_rotation, transform
 from tracking.outputs import write_text
@@ -138,12 +138,43 @@ MarkerSigmaM = Annotated[Number, Field(ge=0, le=MAX_MARKER_SIGMA_M)]
 MarkerSigmaDeg = Annotated[Number, Field(ge=0, le=MAX_MARKER_SIGMA_DEG)]
 
 
+def _one_or_three(high: float, unit: str) -> BeforeValidator:
+    """Checks a σ given as one number or three before pydantic's union of the two does: its error would name the
+    union's members by their validators' internals (function reprs, memory addresses); this one says what is
+    expected."""
+
+    def within(v: Any) -> bool:
+        try:  # what pydantic reads as a number (a numeric string too), but not a YAML boolean
+            return not isinstance(v, bool) and 0 <= float(v) <= high
+        except (TypeError, ValueError):
+            return False
+
+    def check(value: Any) -> Any:
+        items = value if isinstance(value, list) else [value]
+        if len(items) != (3 if isinstance(value, list) else 1) or not all(within(v) for v in items):
+            got = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
+            raise ValueError(f"expected a σ from 0 to {high:g} {unit}, or three (one per body axis), got {got}")
+        return value
+
+    return BeforeValidator(check)
+
+
 class SurveySigma(_Model):
     """How well markers' poses in their bodies' frames are known: 1σ of a centre (m) and of a rotation about each axis
     (degrees), body frame; one number for every axis or one per axis."""
 
-    position_m: MarkerSigmaM | Annotated[list[MarkerSigmaM], Field(min_length=3, max_length=3)] = 0.0
-    tilt_deg: MarkerSigmaDeg | Annotated[list[MarkerSigmaDeg], Field(min_length=3, max_length=3)] = 0.0
+    position_m: Annotated[MarkerSigmaM | Annotated[list[MarkerSigmaM], Field(min_length=3, max_length=3)],
+                          _one_or_three(MAX_MARKER_SIGMA_M, "m")] = 0.0
+    tilt_deg: Annotated[MarkerSigmaDeg | Annotated[list[MarkerSigmaDeg], Field(min_length=3, max_length=3)],
+                        _one_or_three(MAX_MARKER_SIGMA_DEG, "degrees")] = 0.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _a_mapping(cls, value: Any) -> Any:
+        if not isinstance(value, dict | SurveySigma):
+            got = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
+            raise ValueError(f"expected a mapping with position_m (m) and tilt_deg (degrees), got {got}")
+        return value
 
     def position(self) -> np.ndarray:
         """(3,) σ of the centre along the body's axes, m."""
@@ -435,6 +466,7 @@ def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
     elif tipless:
         out.append(f"{path}: cones: no tip for {', '.join(tipless)}; reported at the topside marker's centre, "
                    "not at the cone tip")
+    out += _markers_off_cones(path, rig, paired)
     loose = [c for c in rig.cameras if (c.time_offset_sigma or 0.0) > WARN_CLOCK_SIGMA_S]
     if loose:
         worst = max(c.time_offset_sigma or 0.0 for c in loose)
@@ -450,6 +482,23 @@ def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
                    "offsets' σ grows by what such errors do at each cone (a marker's tilt turns the topside's pose), "
                    "and cones may be withheld: refine them with topside survey, or survey the markers better")
     return tuple(out)
+
+
+def _markers_off_cones(path: Path, rig: Rig, paired: list[str]) -> list[str]:
+    """When `cones` is given, a line per marker whose cone is neither in it nor a pair's (a pair's cone without a tip
+    has its own warning): what the tracker does with it, which is not to report an offset at that cone."""
+    if not rig.cones:
+        return []
+    out = []
+    pairs = rig.all_pairs()
+    for i, m in enumerate(rig.markers):
+        if m.cone in rig.cones or m.cone in paired:
+            continue
+        its = sorted({p.cone for p in pairs if m.id in (p.jacket, p.topside)})
+        does = (f"marker {m.id} is tracked for cone {', '.join(its)}, as pairs says" if its else
+                f"marker {m.id} is in no pair, so it gives no offset")
+        out.append(one_line(f"{path}: markers[{i}].cone: {m.cone} is not in cones, and no pair is on it; {does}"))
+    return out
 
 
 def load_rig(path: str | Path) -> Rig:

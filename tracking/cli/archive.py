@@ -42,6 +42,15 @@ class ArchiveSettings:
 
         return cls(load_private_key(key) if key is not None else None, vessel, operator, video)
 
+    @classmethod
+    def for_track(cls, mcap: Path | None, key: Path | None, vessel: str, operator: str, video: VideoFormat
+                  ) -> ArchiveSettings | None:
+        """`track`'s settings: None without --mcap; a one-line InputError for a --key with no archive to sign."""
+        if mcap is None and key is not None:
+            raise InputError("--key", f"{key} signs the MCAP archive, and no --mcap is given (give --mcap FILE to "
+                                      "write a signed archive, or leave out --key)")
+        return cls.read(key, vessel, operator, video) if mcap is not None else None
+
     @property
     def metadata(self) -> dict[str, str]:
         return {"vessel": self.vessel, "operator": self.operator}

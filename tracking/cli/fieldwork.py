@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -408,8 +409,10 @@ def survey(
     rig: Annotated[Path, typer.Option(help="Rig file whose markers to survey (its clocks measured: topside sync).")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Rig file to write, with the markers' corrected poses.")],
     start: Annotated[float | None, typer.Option("--from", help="From this capture time, s (the bodies still or "
-                                                               "moving rigidly: before the lift).")] = None,
-    end: Annotated[float | None, typer.Option("--to", help="To this capture time, s.")] = None,
+                                                               "moving rigidly: before the lift).",
+                                                callback=finite(-math.inf))] = None,
+    end: Annotated[float | None, typer.Option("--to", help="To this capture time, s.", callback=finite(-math.inf))
+                   ] = None,
     refine: RefineOption = DEFAULT_REFINEMENT,
 ) -> None:
     """Refine every marker's pose on its body from the footage (a bundle adjustment of all cameras' frames and the

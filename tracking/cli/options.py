@@ -76,15 +76,17 @@ WebPortOption = Annotated[int, typer.Option(help="Port of the web viewer's page 
 
 def finite(low: float, low_open: bool = True, high: float = math.inf, allow_inf: bool = False
            ) -> Callable[[float | None], float | None]:
-    """A typer callback refusing NaN, infinities (unless allow_inf) and values outside (low, high] (or [low, high])."""
+    """A typer callback refusing NaN, infinities (unless allow_inf) and values outside (low, high] (or [low, high]);
+    low=-math.inf: any finite number up to high (a capture time)."""
 
     def check(value: float | None) -> float | None:
         if value is None:
             return value
         inside = (value > low if low_open else value >= low) and value <= high
         if math.isnan(value) or (math.isinf(value) and not allow_inf) or not inside:
-            bound = f"{'>' if low_open else '≥'} {low:g}" + (f" and ≤ {high:g}" if math.isfinite(high) else "")
-            raise typer.BadParameter(f"{value} is not a finite number {bound}")
+            bounds = [f"{'>' if low_open else '≥'} {low:g}"] if math.isfinite(low) else []
+            bounds += [f"≤ {high:g}"] if math.isfinite(high) else []
+            raise typer.BadParameter(" ".join([f"{value} is not a finite number", " and ".join(bounds)]).strip())
         return value
 
     return check

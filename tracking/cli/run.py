@@ -180,7 +180,7 @@ def track(
     warn_rig(the_rig)
     check_outputs({"--out": out, "--rrd": rrd, "--mcap": mcap}, [*rig_inputs(the_rig), truth, key])
     truth_df = read_truth(truth) if truth else None
-    archive = ArchiveSettings.read(key, vessel, operator, video) if mcap is not None else None  # before any work
+    archive = ArchiveSettings.for_track(mcap, key, vessel, operator, video)  # before any work
     options = {"mode": mode.value, "refine": refine.value, **({"roi": "on"} if roi else {})}
     report = FilterReport()
     plans = plan_rig(the_rig, chunk_frames=chunk_frames)

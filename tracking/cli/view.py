@@ -2,20 +2,23 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from tracking.cli.options import WEB_PORT_DEFAULT, WebPortOption
+from tracking.cli.options import WEB_PORT_DEFAULT, WebPortOption, finite
 from tracking.errors import InputError
 
 
 def view(
     recording: Annotated[Path, typer.Argument(help="A Rerun recording (.rrd), or a segmented one (its .rrd name "
                                                    "or its .segments.csv).")],
-    start: Annotated[float | None, typer.Option("--from", help="Open from this capture time, s.")] = None,
-    end: Annotated[float | None, typer.Option("--to", help="Open up to this capture time, s.")] = None,
+    start: Annotated[float | None, typer.Option("--from", help="Open from this capture time, s.",
+                                                callback=finite(-math.inf))] = None,
+    end: Annotated[float | None, typer.Option("--to", help="Open up to this capture time, s.",
+                                              callback=finite(-math.inf))] = None,
     web: Annotated[bool, typer.Option("--web", help="Serve the web viewer instead of opening the native one.")] = False,
     bind: Annotated[str, typer.Option(help="Address (or host name) of this machine the viewer's servers listen on.")
                     ] = "127.0.0.1",
