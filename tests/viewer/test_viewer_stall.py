@@ -107,7 +107,8 @@ def longest_wait(samples: list[tuple[float, int, int]], column: int) -> tuple[fl
     return longest, since
 
 
-@pytest.mark.parametrize(("scope", "segment_s"), [("all", 1.0), ("all", 2.0), ("superintendent", 2.0)])
+@pytest.mark.parametrize(("scope", "segment_s"), [("all", 1.0), ("superintendent", 2.0)])  # the 1 s segments cross
+# most boundaries; the superintendent scope has its own stream
 def test_a_stuck_page_stops_neither_the_recording_nor_the_csv(installation: Path, tmp_path: Path, scope: str,
                                                              segment_s: float) -> None:
     samples, proc = run_with_stuck_page(tmp_path, installation / "rig.yaml", scope, segment_s)
