@@ -26,6 +26,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from tracking.estimator import ESTIMATORS
+from tracking.geometry import rt_to_T
 from tracking.pipeline import TrackStats, track_rig
 from tracking.rig import Rig, load_rig
 
@@ -64,9 +65,7 @@ def plain_opencv(rig: Rig) -> tuple[Counter, list[np.ndarray]]:
                     found[entry.name] += 1
                     ok, r, t = cv2.solvePnP(obj, c.reshape(4, 2), camera.K, camera.dist, flags=cv2.SOLVEPNP_IPPE_SQUARE)
                     if ok:
-                        T = np.eye(4)
-                        T[:3, :3], T[:3, 3] = cv2.Rodrigues(r)[0], t.ravel()
-                        poses[int(i)] = T
+                        poses[int(i)] = rt_to_T(r.ravel(), t.ravel())
                 for j, T_cj in poses.items():
                     for s, T_cs in poses.items():
                         if markers[j].body == "jacket" and markers[s].body == "topside":

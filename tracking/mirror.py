@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from tracking.camera import CameraModel
+from tracking.geometry import inverse, rvec_tvec
 from tracking.pose import MarkerPose, marker_object_points
 from tracking.rig import Marker, Rig
 
@@ -49,10 +50,10 @@ def _predicted_corners(anchor: MarkerPose, T_body_anchor: np.ndarray, T_body_mar
                        camera: CameraModel) -> list[np.ndarray]:
     """(4, 2) distorted pixels of a marker's corners as each IPPE solution of an anchor marker on its body puts them."""
     obj = marker_object_points(size)
+    T_anchor_marker = inverse(T_body_anchor) @ T_body_marker
     out = []
     for s in anchor.solutions:
-        T = s.T_camera_marker @ np.linalg.inv(T_body_anchor) @ T_body_marker
-        px, _ = cv2.projectPoints(obj, cv2.Rodrigues(T[:3, :3])[0], T[:3, 3], camera.K, camera.dist)
+        px, _ = cv2.projectPoints(obj, *rvec_tvec(s.T_camera_marker @ T_anchor_marker), camera.K, camera.dist)
         out.append(px.reshape(4, 2))
     return out
 

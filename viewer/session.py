@@ -474,7 +474,7 @@ class Recorder:
             self._blueprint_sent = now
 
     def close(self, stopped: str = "") -> None:
-        """Final status and flush to disk (stopped: the run's early end, which the recording's status has already)."""
+        """Final status and flush to disk (stopped: not recorded here; the archive and the command say it)."""
         self.flush_estimates()
         self.status.log_if_due(self.rec, self._last_time, force=True)
         if self._last_update is not None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from functools import lru_cache
 from statistics import NormalDist
 
 import numpy as np
@@ -126,6 +127,7 @@ def prior_covariance(tuning: FilterTuning) -> np.ndarray:
 
 
 
+@lru_cache(maxsize=256)
 def _chi2_quantile(dof: int, p: float) -> float:
     """χ² quantile at p over dof degrees of freedom (Wilson-Hilferty, within 1 % from 2 degrees of freedom up)."""
     z = NormalDist().inv_cdf(p)
