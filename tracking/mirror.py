@@ -10,7 +10,13 @@ reads as j (in any of its four turns, within the detector's error correction rat
 
 A mirror-ambiguous detection is kept only where an unambiguous marker of its body in the same frame puts it: its
 corners within MIRROR_TOLERANCE of a marker side of where that marker's pose (either IPPE solution) and the rig
-predict them. Otherwise it is dropped and counted: a marker seen from behind never reaches the poses or the filter.
+predict them. A frame may hold no unambiguous marker of its body (a lone topside marker whose id reads the same in a
+mirror, as 8 and 9 do in DICT_4X4_*): then an unambiguous marker of the other body confirms it, more loosely, since
+the bodies move apart (a mirrored view never reads as an unambiguous id, so such a marker is seen the right way): the detection (either IPPE solution) turned within MIRROR_BODY_TURN_RAD of where the rig's
+mated geometry puts it and within MIRROR_BODY_REACH_SIDES of it. A mirrored reading faces the wrong way or is turned by
+a quarter turn or more; a reflection in the sea sits tens of metres below. Otherwise it is dropped and counted: a
+marker seen from behind never reaches the poses or the filter. Left open: a reflection in a vertical surface within
+a few metres of a lone self-mirroring marker passes the loose check (the filter's gate is then the guard).
 A rig whose ids have no mirror among them (DICT_6X6_250 below id 250 has none) is not affected at all.
 """
 
@@ -22,13 +28,17 @@ import cv2
 import numpy as np
 
 from tracking.camera import CameraModel
-from tracking.geometry import inverse, rvec_tvec
+from tracking.geometry import inverse, rotation_angle, rvec_tvec
 from tracking.pose import MarkerPose, marker_object_points
 from tracking.rig import Marker, Rig
 
 MIRROR_TOLERANCE = 0.3  # mean corner distance, in marker sides, within which a prediction confirms a detection: a
 # mirrored reading's corners are a side or more from their places (its corner order is mirrored, or it sits at
 # another marker's place); a single marker's pose predicts a neighbour on its body within a few percent of a side
+MIRROR_BODY_TURN_RAD = np.radians(20.0)  # a topside hangs within a few degrees of level and of its heading over the
+# jacket; a mirrored reading is turned 90° or more, or faces away
+MIRROR_BODY_REACH_SIDES = 20.0  # marker sides (20 m at 1 m markers): a topside being set down is within this of its
+# cones; a reflection in the sea is twice the marker's height above it away
 
 
 def mirror_ambiguous(rig: Rig, correction_rate: float | None = None) -> frozenset[int]:
@@ -74,11 +84,31 @@ def confirmed(pose: MarkerPose, poses: Mapping[int, MarkerPose], markers: Mappin
     return False
 
 
+def confirmed_by_other_body(pose: MarkerPose, poses: Mapping[int, MarkerPose], markers: Mapping[int, Marker],
+                            ambiguous: frozenset[int], size: float) -> bool:
+    """Whether an unambiguous marker of the other body puts a mirror-ambiguous marker, as the rig's mated geometry
+    would, within MIRROR_BODY_TURN_RAD and MIRROR_BODY_REACH_SIDES of one of its IPPE solutions."""
+    body = markers[pose.id].body
+    T_body_marker = markers[pose.id].T_body_marker
+    for k, anchor in poses.items():
+        if k in ambiguous or markers[k].body == body:
+            continue
+        T_anchor_marker = inverse(markers[k].T_body_marker) @ T_body_marker  # body frames coincide when mated
+        for a in anchor.solutions:
+            T = a.T_camera_marker @ T_anchor_marker
+            for s in pose.solutions:
+                if rotation_angle(T[:3, :3], s.T_camera_marker[:3, :3]) < MIRROR_BODY_TURN_RAD and \
+                        np.linalg.norm(T[:3, 3] - s.T_camera_marker[:3, 3]) < MIRROR_BODY_REACH_SIDES * size:
+                    return True
+    return False
+
+
 def drop_mirrored(poses: dict[int, MarkerPose], markers: Mapping[int, Marker], ambiguous: frozenset[int],
                   size: float, camera: CameraModel) -> tuple[dict[int, MarkerPose], list[int]]:
     """The frame's poses without the mirror-ambiguous ones nothing confirms, and the ids dropped."""
     if not ambiguous or not ambiguous & poses.keys():
         return poses, []
     dropped = [i for i in sorted(ambiguous & poses.keys())
-               if not confirmed(poses[i], poses, markers, ambiguous, size, camera)]
+               if not confirmed(poses[i], poses, markers, ambiguous, size, camera)
+               and not confirmed_by_other_body(poses[i], poses, markers, ambiguous, size)]
     return {i: p for i, p in poses.items() if i not in dropped}, dropped

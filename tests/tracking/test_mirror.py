@@ -82,6 +82,30 @@ def test_a_mirrored_marker_is_dropped_and_a_true_one_kept() -> None:
     assert drop_mirrored(alone, rig.marker_by_id, ambiguous, SIDE, camera) == ({}, [8])
 
 
+def test_a_lone_self_mirroring_marker_is_confirmed_by_the_other_body() -> None:
+    """A topside whose only marker (8) reads the same in a mirror: the jacket's marker 5 puts it there, as the mated
+    rig would (lifted 2 cm and turned 5°: the bodies move apart); its mirror image, turned a quarter turn, is dropped."""
+    rig = Rig(dictionary="DICT_4X4_1000", marker_size=SIDE, markers=[
+        Marker(id=5, body="jacket", cone="A", face="astern", center=[0.0, 0.0, 0.0]),
+        Marker(id=8, body="topside", cone="A", face="astern", center=[0.0, 0.0, 0.08])])
+    assert mirror_ambiguous(rig) == {8}
+    jacket = placements(rig)[0]
+    lift = np.eye(4)
+    lift[:3, :3] = cv2.Rodrigues(np.array([0.0, 0.0, np.radians(5.0)]))[0]
+    lift[:3, 3] = [0.01, 0.0, 0.02]  # topside frame in the jacket frame
+    T_camera_body = jacket.T_camera_marker @ np.linalg.inv(rig.markers[0].T_body_marker)
+    topside = PlacedMarker(8, T_camera_body @ lift @ rig.markers[1].T_body_marker, SIDE)
+    camera = CameraModel(K, DIST, *SIZE)
+    ambiguous = mirror_ambiguous(rig)
+    image = render(K, DIST, SIZE, [jacket, topside], DICT)
+    kept, dropped = drop_mirrored(poses_of(rig, image), rig.marker_by_id, ambiguous, SIDE, camera)
+    assert set(kept) == {5, 8} and dropped == []
+    mirror = poses_of(rig, mirrored(image, topside))
+    assert set(mirror) == {5, 8}
+    kept, dropped = drop_mirrored(mirror, rig.marker_by_id, ambiguous, SIDE, camera)
+    assert set(kept) == {5} and dropped == [8]
+
+
 @pytest.mark.parametrize("distance", [0.6, 1.4])
 def test_white_on_black_markers_are_found_and_fitted(distance: float) -> None:
     rig = board_rig((5, 6))
