@@ -71,6 +71,13 @@ def rotation_jacobian(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return R_v, dR.reshape(3, 3, 3)
 
 
+def rotation_jacobian_of(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation (3, 3) of a rotation vector v (3,) and its derivatives (3, 3, 3), dR[k] = ∂R / ∂v_k (OpenCV's
+    analytic Rodrigues Jacobian)."""
+    R, dR = cv2.Rodrigues(np.asarray(v, dtype=np.float64).reshape(3))
+    return R, dR.reshape(3, 3, 3)
+
+
 def quaternion_rotation(q: np.ndarray) -> np.ndarray:
     """(3, 3) rotation matrix of a quaternion (4,) [w, x, y, z] (Hamilton, scalar first; normalised here). The closed
     form, as the rigs' markers were measured with."""

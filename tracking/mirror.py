@@ -12,11 +12,12 @@ A mirror-ambiguous detection is kept only where an unambiguous marker of its bod
 corners within MIRROR_TOLERANCE of a marker side of where that marker's pose (either IPPE solution) and the rig
 predict them. A frame may hold no unambiguous marker of its body (a lone topside marker whose id reads the same in a
 mirror, as 8 and 9 do in DICT_4X4_*): then an unambiguous marker of the other body confirms it, more loosely, since
-the bodies move apart (a mirrored view never reads as an unambiguous id, so such a marker is seen the right way): the detection (either IPPE solution) turned within MIRROR_BODY_TURN_RAD of where the rig's
-mated geometry puts it and within MIRROR_BODY_REACH_SIDES of it. A mirrored reading faces the wrong way or is turned by
-a quarter turn or more; a reflection in the sea sits tens of metres below. Otherwise it is dropped and counted: a
-marker seen from behind never reaches the poses or the filter. Left open: a reflection in a vertical surface within
-a few metres of a lone self-mirroring marker passes the loose check (the filter's gate is then the guard).
+the bodies move apart (a mirrored view never reads as an unambiguous id, so that marker is seen the right way): the
+detection (either IPPE solution) turned within MIRROR_BODY_TURN_RAD of where the rig's mated geometry puts it and
+within MIRROR_BODY_REACH_SIDES of it. A mirrored reading faces the wrong way or is turned by a quarter turn or more;
+a reflection in the sea sits tens of metres below. Otherwise it is dropped and counted: a marker seen from behind
+never reaches the poses or the filter. Left open: a reflection in a vertical surface within a few metres of a lone
+self-mirroring marker passes the loose check (the filter's gate is then the guard).
 A rig whose ids have no mirror among them (DICT_6X6_250 below id 250 has none) is not affected at all.
 """
 

@@ -684,3 +684,37 @@ def test_markers_off_their_survey_stay_inside_sigma_while_the_topside_comes_in()
             # (with the tilt acting over the markers' surveyed 2 m instead: 64 % within 2σ)
         else:
             assert np.mean(z > 3) > 0.5  # 83 %
+
+
+def test_the_corners_analytic_jacobian_is_their_derivative() -> None:
+    """corner_jacobian's analytic Jacobian against central differences of predict_corners, at a state with every
+    rotation nonzero (topside, camera error, a marker's survey error), for a topside and a jacket marker."""
+    from tracking.estimator.measurements import corner_jacobian, predict_corners
+
+    the_rig = Rig.model_validate({**camera_rig().model_dump(exclude_none=True),
+                                  "survey_sigma": {"position_m": 0.01, "tilt_deg": 0.5}})
+    kf = TopsideFilter(the_rig)
+    rng = np.random.default_rng(3)
+    x = kf.x.copy()
+    x[:6] = [0.3, -2.0, 1.5, 0.02, -0.01, 0.05]
+    cam = next(iter(kf.cameras.values()))
+    x[cam.index:cam.index + 6] = rng.normal(0.0, 0.01, 6)
+    nominal = np.eye(4)
+    nominal[:3, :3] = rotation(np.array([1.4, 0.3, -0.2]))
+    nominal[:3, 3] = [20.0, 30.0, 5.0]
+    for marker in (next(iter(kf.topside_corners)), next(iter(kf.jacket_corners))):
+        i = kf.consider.markers[marker]
+        x[i:i + 6] = rng.normal(0.0, 0.01, 6)
+        columns = [*range(6), *range(cam.index, cam.index + 6), *range(i, i + 6)]
+        h, J = corner_jacobian(kf, nominal, cam.index, marker, x, K, columns)
+        assert np.allclose(h, predict_corners(kf, nominal, cam.index, marker, x, K))
+        step = 1e-6
+        for j, k in enumerate(columns):
+            up, down = x.copy(), x.copy()
+            up[k] += step
+            down[k] -= step
+            numeric = (predict_corners(kf, nominal, cam.index, marker, up, K)
+                       - predict_corners(kf, nominal, cam.index, marker, down, K)) / (2 * step)
+            assert np.allclose(J[:, j], numeric, rtol=1e-5, atol=1e-3), (marker, k, J[:, j], numeric)
+        if marker in kf.jacket_corners:
+            assert not J[:, :6].any()  # a jacket marker does not move with the topside

@@ -84,7 +84,8 @@ def test_a_mirrored_marker_is_dropped_and_a_true_one_kept() -> None:
 
 def test_a_lone_self_mirroring_marker_is_confirmed_by_the_other_body() -> None:
     """A topside whose only marker (8) reads the same in a mirror: the jacket's marker 5 puts it there, as the mated
-    rig would (lifted 2 cm and turned 5°: the bodies move apart); its mirror image, turned a quarter turn, is dropped."""
+    rig would (lifted 2 cm and turned 5°: the bodies move apart); its mirror image, turned a quarter turn, is
+    dropped."""
     rig = Rig(dictionary="DICT_4X4_1000", marker_size=SIDE, markers=[
         Marker(id=5, body="jacket", cone="A", face="astern", center=[0.0, 0.0, 0.0]),
         Marker(id=8, body="topside", cone="A", face="astern", center=[0.0, 0.0, 0.08])])

@@ -36,7 +36,7 @@ from tracking.estimator.noise import (
 )
 from tracking.estimator.placement import camera_covariance, place_camera, place_topside
 from tracking.estimator.process import Transition, rate_decay
-from tracking.estimator.state import CameraState, FilterState, point_offset_matrix
+from tracking.estimator.state import CameraState, FilterState
 from tracking.geometry import inverse, numeric_jacobian, pose_params, pose_residual, rotation
 from tracking.offsets import BodyObservation
 from tracking.pose import BodyPose, Choice
@@ -224,13 +224,14 @@ class TopsideFilter(FilterState):
         limit = REPORT_WARMUP_SIGMA_M if (self.warming() if warming is None else warming) else REPORT_MAX_SIGMA_M
         clock = self.clock_bound(cameras)
         out = []
-        for cone, r in sorted(self.cones.items()):
-            H = point_offset_matrix(r)
-            cov = timed = H @ P[:STATE, :STATE] @ H.T
-            if clock:  # the estimate is the topside's at a time its cameras' clocks hold to σ: its motion over it
-                speed, rates = H[:, :6] @ x[6:STATE], H[:, :6] @ P[6:STATE, 6:STATE] @ H[:, :6].T
-                cov = cov + clock**2 * (np.outer(speed, speed) + rates)
-            offset = H @ x[:STATE]
+        names, H = self.cone_rows
+        covs = timeds = H @ P[:STATE, :STATE] @ H.transpose(0, 2, 1)  # (C, 3, 3)
+        if clock:  # the estimate is the topside's at a time its cameras' clocks hold to σ: its motion over it
+            speeds = H[:, :, :6] @ x[6:STATE]
+            covs = covs + clock**2 * (speeds[:, :, None] * speeds[:, None, :]
+                                      + H[:, :, :6] @ P[6:STATE, 6:STATE] @ H[:, :, :6].transpose(0, 2, 1))
+        offsets = H @ x[:STATE]
+        for cone, offset, cov, timed in zip(names, offsets, covs, timeds, strict=True):
             withheld = self._withheld(offset, cov, timed, limit)
             offset = np.full(3, np.nan) if withheld else offset
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))

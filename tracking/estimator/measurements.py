@@ -2,9 +2,9 @@
 
 A marker's four undistorted corners (8 ideal pixels) are predicted through T_camera_jacket (jacket markers) or
 T_camera_jacket · T_jacket_topside (topside markers), the marker turned and moved by its survey error (consider
-states), plus its view's bias (8 states per (camera, marker)). Their Jacobian is a forward difference over the
-state entries they depend on. Corners far off are down-weighted (Huber-like, CORNER_HUBER_CHI2), a marker's corners
-gated by their Mahalanobis distance (CORNER_GATE_CHI2). A view's bias renews as its marker's image moves.
+states), plus its view's bias (8 states per (camera, marker)). Their Jacobian is analytic, over the state entries
+they depend on. Corners far off are down-weighted (Huber-like, CORNER_HUBER_CHI2), a marker's corners gated by their
+Mahalanobis distance (CORNER_GATE_CHI2). A view's bias renews as its marker's image moves.
 
 A pair offset (topside marker S displaced from its mated position, jacket frame) is, to first order in ω,
 o = (R - I) r_S + t ≈ t - [r_S]× ω: linear in the state (point_offset_matrix).
@@ -38,7 +38,7 @@ from tracking.estimator.state import (
     point_offset_matrix,
     topside_pose,
 )
-from tracking.geometry import JACOBIAN_STEP, inverse, rotation, skew
+from tracking.geometry import inverse, rotation, rotation_jacobian_of, skew
 from tracking.offsets import BodyObservation, PairOffset
 
 Measurement = PairOffset | BodyObservation
@@ -62,11 +62,12 @@ def preferred(group: list[Measurement]) -> list[Measurement]:
     return observations or group
 
 
-def predict_corners(s: FilterState, nominal: np.ndarray, index: int, marker: int, x: np.ndarray, K: np.ndarray
-                    ) -> np.ndarray:
+def predict_corners(s: FilterState, nominal: np.ndarray, index: int, marker: int, x: np.ndarray, K: np.ndarray,
+                    T_camera_jacket: np.ndarray | None = None) -> np.ndarray:
     """(8,) ideal pixels of a marker's corners predicted from a state x (n,), through a camera at nominal
-    T_jacket_camera (4, 4) whose error states start at index, and intrinsics K (3, 3)."""
-    T = inverse(camera_pose(nominal, index, x))
+    T_jacket_camera (4, 4) whose error states start at index (T_camera_jacket: that camera's pose in x, when the
+    caller has it), and intrinsics K (3, 3)."""
+    T = inverse(camera_pose(nominal, index, x)) if T_camera_jacket is None else T_camera_jacket
     if marker in s.topside_corners:
         T = T @ topside_pose(x)
         X = s.topside_corners[marker]
@@ -81,17 +82,51 @@ def predict_corners(s: FilterState, nominal: np.ndarray, index: int, marker: int
     return (uv[:, :2] / uv[:, 2:3]).reshape(-1)
 
 
+_UNIT = np.repeat(np.eye(3)[:, None, :], 4, axis=1)  # (3, 4, 3) ∂(corner + δ)/∂δ_k of four corners: [k, n] = e_k
+
+
 def corner_jacobian(s: FilterState, nominal: np.ndarray, index: int, marker: int, x: np.ndarray, K: np.ndarray,
                     columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
     """A marker's corners predicted from a state x (n,) as predict_corners, (8,) ideal pixels, and their (8, C)
-    forward-difference Jacobian with respect to the state's entries at columns (C,)."""
-    h = predict_corners(s, nominal, index, marker, x, K)
-    J = np.empty((8, len(columns)))
+    Jacobian with respect to the state's entries at columns (C,): the topside's (0-5), the camera's (from index) and
+    the marker's consider states, analytic (each rotation through OpenCV's Rodrigues Jacobian); zero elsewhere."""
+    R_err, dR_err = rotation_jacobian_of(x[index:index + 3])
+    R_n = nominal[:3, :3]
+    R_c = R_err @ R_n  # T_jacket_camera's rotation: a corner P (jacket frame) is at pc = R_cᵀ (P - t_c)
+    t_c = nominal[:3, 3] + x[index + 3:index + 6]
+    topside = marker in s.topside_corners
+    X = s.topside_corners[marker] if topside else s.jacket_corners[marker]  # (4, 3) in its body's frame
+    firsts: list[int] = []  # each block's first state index; its (6, 4, 3) derivatives of the jacket-frame corners
+    blocks: list[np.ndarray] = []
+    i = s.consider.markers.get(marker)
+    if i is not None:  # the marker turned by δθ about its centre and moved by δp
+        c = s.centres[marker]
+        R_m, dR_m = rotation_jacobian_of(x[i:i + 3])
+        firsts.append(i)
+        blocks.append(np.concatenate([(X - c) @ dR_m.transpose(0, 2, 1), _UNIT]))
+        if x[i:i + 6].any():
+            X = c + (X - c) @ R_m.T + x[i + 3:i + 6]
+    if topside:
+        R_t, dR_t = rotation_jacobian_of(x[3:6])
+        blocks = [d @ R_t.T for d in blocks]
+        firsts.append(0)
+        blocks.append(np.concatenate([_UNIT, X @ dR_t.transpose(0, 2, 1)]))  # (t, ω)
+        X = X @ R_t.T + x[:3]
+    d = X - t_c
+    D = np.concatenate([*blocks, np.zeros((6, 4, 3))]) @ R_c  # (6 B + 6, 4, 3): ∂pc, the camera's last
+    D[-6:-3] = d @ dR_err @ R_n
+    D[-3:] = -R_c[:, None, :]
+    firsts.append(index)
+    uv = (d @ R_c) @ K.T
+    h = uv[:, :2] / uv[:, 2:3]
+    A = (K[None, :2, :] - h[:, :, None] * K[None, 2:3, :]) / uv[:, 2, None, None]  # (4, 2, 3) ∂pixel / ∂pc
+    full = (A @ D.transpose(1, 2, 0)).reshape(8, -1)  # (8, 6 B + 6)
+    where = {first + k: 6 * b + k for b, first in enumerate(firsts) for k in range(6)}
+    J = np.zeros((8, len(columns)))
     for j, k in enumerate(columns):
-        x1 = x.copy()
-        x1[k] += JACOBIAN_STEP
-        J[:, j] = (predict_corners(s, nominal, index, marker, x1, K) - h) / JACOBIAN_STEP
-    return h, J
+        if k in where:
+            J[:, j] = full[:, where[k]]
+    return h.reshape(-1), J
 
 
 def placed(cam: CameraState) -> np.ndarray:
@@ -131,11 +166,12 @@ def _renewed(s: FilterState, o: BodyObservation) -> list[tuple[ViewBias, float]]
     if cam is None or cam.T_jacket_camera is None:
         return []
     out = []
+    T_camera_jacket = inverse(camera_pose(cam.T_jacket_camera, cam.index, s.x))
     for marker in o.corners:
         v = s.views.get((o.camera, marker))
         if v is None or v.time == o.time or (marker in s.topside_corners and not s.topside_placed):
             continue
-        h = predict_corners(s, cam.T_jacket_camera, cam.index, marker, s.x, o.K)
+        h = predict_corners(s, cam.T_jacket_camera, cam.index, marker, s.x, o.K, T_camera_jacket)
         travel = float(np.linalg.norm((h - v.corners).reshape(4, 2), axis=1).mean())
         by_travel, by_time = np.exp(-travel / VIEW_BIAS_RENEW_PX), np.exp(-(o.time - v.time) / VIEW_BIAS_TAU_S)
         v.corners, v.time = h, o.time
@@ -146,34 +182,35 @@ def _renewed(s: FilterState, o: BodyObservation) -> list[tuple[ViewBias, float]]
 def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray, topside: bool,
                   time: float) -> bool:
     """One Kalman update with the corners (4, 2) of some markers of one body, each with its view's bias; False when
-    none was used."""
+    none was used. Each marker's H touches only its columns (the bodies', its consider and bias states): the
+    products are taken over those."""
     columns = [*(range(6) if topside else ()), *range(cam.index, cam.index + 6)]
     views = {marker: view(s, cam, marker, K, time).index for marker in sorted(corners)}
-    Hs, ys, Rs = [], [], []
+    used: list[tuple[list[int], np.ndarray, np.ndarray, np.ndarray]] = []
     for marker, z in sorted(corners.items()):
         i = s.consider.markers.get(marker)
         cols = columns if i is None else [*columns, *range(i, i + 6)]
         h, J = corner_jacobian(s, placed(cam), cam.index, marker, s.x, K, cols)
-        v = slice(views[marker], views[marker] + VIEW)
-        H = np.zeros((8, s.size))
-        H[:, cols] = J
-        H[:, v] = np.eye(VIEW)
-        y = z.reshape(-1) - h - s.x[v]
-        HPH = H @ s.P @ H.T
+        v = views[marker]
+        idx = [*cols, *range(v, v + VIEW)]
+        H = np.hstack([J, np.eye(VIEW)])  # (8, |idx|)
+        y = z.reshape(-1) - h - s.x[v:v + VIEW]
+        HPH = H @ s.P[np.ix_(idx, idx)] @ H.T
         R = _corner_covariance(s, cam, J, HPH, y, topside)
         if float(y @ np.linalg.solve(HPH + R, y)) > CORNER_GATE_CHI2:
             s.rejected += 1
             continue
-        Hs.append(H)
-        ys.append(y)
-        Rs.append(R)
-    if not Hs:
+        used.append((idx, H, y, R))
+    if not used:
         return False
-    H = np.vstack(Hs)
+    union = sorted({k for idx, *_ in used for k in idx})
+    where = {k: j for j, k in enumerate(union)}
+    H = np.zeros((VIEW * len(used), len(union)))
     R = np.zeros((H.shape[0], H.shape[0]))
-    for k, R_k in enumerate(Rs):
-        R[8 * k:8 * k + 8, 8 * k:8 * k + 8] = R_k
-    s.apply(H, np.concatenate(ys), R)
+    for k, (idx, H_k, _, R_k) in enumerate(used):
+        H[VIEW * k:VIEW * k + VIEW, [where[c] for c in idx]] = H_k
+        R[VIEW * k:VIEW * k + VIEW, VIEW * k:VIEW * k + VIEW] = R_k
+    s.apply(H, np.concatenate([u[2] for u in used]), R, union)
     return True
 
 
@@ -185,11 +222,13 @@ def _corner_covariance(s: FilterState, cam: CameraState, J: np.ndarray, HPH: np.
     if topside and s.clock_sigma.get(cam.name):  # a clock known to σ_t: the topside seen up to σ_t early
         moved = J[:, :6] @ s.x[6:12] * s.clock_sigma[cam.name]  # or late, (8,) px along its motion
         R += np.outer(moved, moved)  # (cone_estimates adds what the cameras' clocks share)
-    for j in range(4):
+    S = (HPH + R).reshape(4, 2, 4, 2)[np.arange(4), :, np.arange(4), :]  # (4, 2, 2): each corner's own block
+    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+    u, w = y[0::2], y[1::2]
+    d2 = (S[:, 1, 1] * u * u - (S[:, 0, 1] + S[:, 1, 0]) * u * w + S[:, 0, 0] * w * w) / det  # yᵀ S⁻¹ y per corner
+    for j in np.flatnonzero(d2 > CORNER_HUBER_CHI2):
         b = slice(2 * j, 2 * j + 2)
-        d2_j = float(y[b] @ np.linalg.solve(HPH[b, b] + R[b, b], y[b]))
-        if d2_j > CORNER_HUBER_CHI2:
-            R[b, b] *= d2_j / CORNER_HUBER_CHI2
+        R[b, b] *= d2[j] / CORNER_HUBER_CHI2
     return R
 
 

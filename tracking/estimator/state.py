@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg.lapack import dtrtrs
+from threadpoolctl import threadpool_limits
 
 from tracking.estimator.hypotheses import Hypotheses
 from tracking.estimator.noise import STATE, VIEW, VIEW_BIAS_PX, CornerNoise, FilterTuning, prior_covariance
@@ -21,6 +23,18 @@ from tracking.offsets import body_geometry
 from tracking.pose import body_object_points
 from tracking.rig import Rig
 from tracking.scale import ScaleEvidence
+
+BLAS_THREADS = 1  # the filter's products are of a few hundred rows: on a busy 2-core machine one took 35 µs on one
+# thread and 2.4 ms on OpenBLAS's two (threads spinning for work this small), which made the filter 2-3× slower
+_blas_limited = False
+
+
+def one_blas_thread() -> None:
+    """Limit this process's BLAS to BLAS_THREADS, once (a context per frame would cost 0.3 ms)."""
+    global _blas_limited
+    if not _blas_limited:
+        threadpool_limits(BLAS_THREADS, user_api="blas")
+        _blas_limited = True
 
 
 def point_offset_matrix(r: np.ndarray) -> np.ndarray:
@@ -148,10 +162,13 @@ class FilterState:
     topside_corners: dict[int, np.ndarray] = field(init=False)  # marker id -> its corners (4, 3), topside frame
     centres: dict[int, np.ndarray] = field(init=False)  # marker id -> its centre (3,), its body's frame
     cones: dict[str, np.ndarray] = field(init=False)  # cone -> the point (3,) whose offset is the cone's
+    cone_rows: tuple[list[str], np.ndarray] = field(init=False)  # the cones in name order and their offsets' (C, 3,
+    # 12) point_offset_matrix
     clock_sigma: dict[str, float] = field(init=False)  # camera -> its clock's σ, s (rig: time_offset_sigma)
     surveys: dict[str, tuple[np.ndarray, float]] = field(init=False)  # camera -> surveyed position (3,), σ m
 
     def __post_init__(self) -> None:
+        one_blas_thread()
         self.cameras = {c.name: CameraState(STATE * (1 + k), c.mount, c.name) for k, c in enumerate(self.rig.cameras)}
         self.body_size = STATE * (1 + len(self.cameras))
         self.consider = ConsiderStates.of(self.rig, self.body_size)
@@ -170,6 +187,8 @@ class FilterState:
                                 for i, T in geometry.topside.items()}
         self.centres = {m.id: np.array(m.center, dtype=float) for m in self.rig.markers}
         self.cones = cone_points(self.rig)
+        names = sorted(self.cones)
+        self.cone_rows = (names, np.array([point_offset_matrix(self.cones[c]) for c in names]).reshape(-1, 3, STATE))
         self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}
         self.surveys = {c.name: (np.array(c.position, dtype=float), float(c.position_sigma)) for c in self.rig.cameras
                         if c.position is not None and c.position_sigma is not None}
@@ -230,14 +249,35 @@ class FilterState:
                 cam.T_jacket_camera = self.camera_pose(cam)
                 self.x[cam.index:cam.index + 6] = 0.0
 
-    def apply(self, H: np.ndarray, y: np.ndarray, R: np.ndarray) -> None:
-        """Kalman update with H (M, n), innovation y (M,) and measurement covariance R (M, M)."""
-        PHt = self.P @ H.T  # (n, M): O(n² M), where the Joseph form would cost O(n³) for n = 12 per body
-        S = H @ PHt + R
-        K = np.linalg.solve(S, PHt.T).T
-        P = self.P - K @ PHt.T
+    def apply(self, H: np.ndarray, y: np.ndarray, R: np.ndarray, columns: list[int] | None = None) -> None:
+        """Kalman update with H (M, n), innovation y (M,) and measurement covariance R (M, M); with columns (C,), H is
+        (M, C): the state entries it measures (the rest of its row is zero).
+
+        P - P Hᵀ S⁻¹ H P as P - W Wᵀ, W = P Hᵀ L⁻ᵀ (S = L Lᵀ): symmetric by construction, O(n² M) where the Joseph
+        form would cost O(n³) for n = 12 per body."""
+        PHt = self.P @ H.T if columns is None else self.P[:, columns] @ H.T  # (n, M)
+        S = (H @ PHt if columns is None else H @ PHt[columns]) + R
+        try:
+            L = np.linalg.cholesky(S)
+        except np.linalg.LinAlgError:  # S not positive definite (P lost it to rounding): symmetrised instead
+            self._apply_general(PHt, S, y)
+            return
+        Wt, _ = dtrtrs(L, PHt.T, lower=1)  # (M, n): LAPACK's triangular solves, without numpy's per-call checks
+        K = dtrtrs(L, Wt, lower=1, trans=1)[0].T  # (n, M): P Hᵀ S⁻¹
+        W = Wt.T
         c = self.consider.indices  # consider states are not estimated (Schmidt): the others' update, their covariance
         K[c] = 0.0  # and cross-covariance are as with them, their own is kept
+        kept = self.P[c, c]
+        self.P = self.P - W @ W.T
+        self.P[c, c] = kept
+        self.x = self.x + K @ y
+
+    def _apply_general(self, PHt: np.ndarray, S: np.ndarray, y: np.ndarray) -> None:
+        """The update of apply with any invertible S (M, M), made symmetric after."""
+        K = np.linalg.solve(S, PHt.T).T
+        P = self.P - K @ PHt.T
+        c = self.consider.indices
+        K[c] = 0.0
         P[c, c] = self.P[c, c]
         self.x = self.x + K @ y
-        self.P = (P + P.T) / 2  # stays symmetric
+        self.P = (P + P.T) / 2
