@@ -56,7 +56,7 @@ def test_inspect_installation_notebook_executes(kind: str, archived: Archived, m
     outputs = execute("inspect-installation.ipynb")
     text = stream_text(outputs)
     assert "24 estimates of cones ['A']" in text  # straight from the file
-    assert "1 cones: 1 not landed" in text
+    assert "1 cone: 1 not landed" in text
     assert "viewer at 100.17 s: closest approach: 269 mm" in text  # the first event: no set-down in this clip
     tables = html_tables(outputs)
     assert "not landed" in tables[1] and "closest approach" in tables[2]

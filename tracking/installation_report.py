@@ -304,7 +304,7 @@ class Summary:
         if self.cones and counts[Verdict.WITHIN] == len(self.cones):
             return f"every cone landed within ±{TOLERANCE_M * 1e3:.0f} mm (2σ)"
         parts = [f"{n} {v.value}" for v, n in counts.items() if n]
-        return f"{len(self.cones)} cones: " + ", ".join(parts)
+        return f"{len(self.cones)} cone{'s' if len(self.cones) != 1 else ''}: " + ", ".join(parts)
 
 
 def summarise(estimates: pd.DataFrame, frames: pd.DataFrame, start: float, end: float,

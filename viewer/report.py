@@ -263,12 +263,19 @@ def render(record: InstallationRecord, summary: Summary | None = None) -> str:
     return env.get_template(TEMPLATE).render(
         record=record, summary=summary, cones=cones, clock=clock, verdicts=verdict_rows(summary),
         verdict_colors={v.name.lower(): c for v, c in VERDICT_COLORS.items()},
-        integrity_color=INTEGRITY_COLORS.get(record.integrity.state, "#e62828"),
+        integrity_color=INTEGRITY_COLORS.get(record.integrity.state, "#e62828"), banner=banner_color(summary),
         timeline=timeline_figure(summary.cameras, record.frames, span) if summary.cameras else None,
         cameras=camera_rows(record, summary), rig=rig_lines(record), events=event_rows(record, summary),
         provenance=provenance_rows(record), notes=record.notes.sort_values("time").itertuples(index=False),
         tolerance_mm=f"{TOLERANCE_M * 1e3:.0f}", sigmas=f"{CONFIDENCE_SIGMAS:g}", no_estimate=NO_ESTIMATE,
         short=SHORT_HASH, made=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), version=software_version())
+
+
+def banner_color(summary: Summary) -> str:
+    """The headline's colour: green when every cone landed within, red when one is outside, amber otherwise."""
+    if summary.cones and all(c.verdict == Verdict.WITHIN for c in summary.cones):
+        return "#1a7f37"
+    return "#b03a2e" if any(c.verdict == Verdict.OUTSIDE for c in summary.cones) else "#b07800"
 
 
 def write_report(record: InstallationRecord, out: Path, writer: Callable[[Path, str], None]) -> Summary:
