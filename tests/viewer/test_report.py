@@ -153,3 +153,36 @@ def test_the_report_opens_offline_in_chromium(dropout: tuple[Path, Path], tmp_pa
 
     assert pixels((31, 95, 191)) > 150  # the concentricity line (its parts before and after the dropout)
     assert pixels((230, 40, 40)) > 2000  # the tolerance line, the lost camera's bar
+
+
+def test_a_live_recording_names_a_cameras_silence_as_the_tracker_stated_it(installation: Path, tmp_path: Path
+                                                                           ) -> None:
+    """A live session's recording keeps what the live tracker said of a camera (health/<camera>/state); the report
+    names the silence it falls in by it: cam-port frozen, cam-ahead (which said nothing) lost."""
+    from dataclasses import replace
+
+    import rerun as rr
+
+    from tracking.live import LiveUpdate
+    from tracking.pipeline import track_rig
+    from tracking.rig import load_rig
+    from tracking.sources import CameraState, SourceEvent
+    from viewer.session import Recorder
+
+    rr.set_strict_mode(True)
+    rig = load_rig(installation / "rig.yaml")
+    results = [r for _, r in zip(range(24), track_rig(rig, packets=True), strict=False)]
+    before, after = results[:12], [replace(r, frame=replace(r.frame, time=r.time + 2.0)) for r in results[12:]]
+    recorder = Recorder(rig, tmp_path / "live.rrd", layout="superintendent")
+    recorder.on_update(LiveUpdate(now=before[-1].time, results=before))
+    frozen = SourceEvent("cam-port", CameraState.FROZEN, 0.0, "the image does not change")
+    recorder.on_update(LiveUpdate(now=before[-1].time + 0.3, events=[frozen]))
+    recorder.on_update(LiveUpdate(now=after[-1].time, results=after))
+    recorder.close()
+    record = read_record(tmp_path / "live.rrd")
+    assert list(record.stated[["camera", "state", "detail"]].itertuples(index=False, name=None)) == [
+        ("cam-port", "frozen", "the image does not change")]
+    spans = summary_of(record).cameras
+    assert [p.what for p in spans["cam-port"]] == [CameraSpan.LIVE, CameraSpan.FROZEN, CameraSpan.LIVE]
+    assert [p.what for p in spans["cam-ahead"]] == [CameraSpan.LIVE, CameraSpan.LOST, CameraSpan.LIVE]
+    assert spans["cam-port"][1].detail == "the image does not change"
