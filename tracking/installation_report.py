@@ -14,7 +14,8 @@ The model:
 - its verdict rests on the estimate at landing, as the tablet colours it: within (r + 2σ at most the tolerance),
   at the edge (r within, r + 2σ beyond), outside (r beyond); not landed; or no data (no estimate with a number);
 - NO DATA: every run of estimates without a number (their stated reason), and every stretch longer than GAP_S with
-  no estimate at all (no camera measured the cone, or no frames came);
+  no estimate at all (no camera measured the cone, or no frames came); runs of one reason less than MERGE_S apart
+  are one;
 - a camera's timeline from its frames: live while frames come no further than CAMERA_GAP_S apart (no markers where
   its frames held none), lost in a longer silence, ended after its last frame when the record goes on; a state the
   live tracker stated (frozen, lost, ended) names the silence it covers.
@@ -35,6 +36,8 @@ LANDED_DZ_M = 0.05  # a landed topside sits within this of its cone tips: bearin
 # BELOW_CONES_M) and a few σ of Δz (2-7 mm on the simulator's set-downs); a hovering topside is 0.2 m up or more
 LANDED_HOLD_S = 1.0  # Δz must stay down this long: one estimate dipping at the end of a record is not a landing
 GAP_S = 1.0  # no estimate for this long is NO DATA of its own: at 15 FPS a camera gives one every 67 ms
+MERGE_S = 0.5  # a cone shown for less than this between two NO DATA periods of one reason: one period (a cone at
+# the σ limit flickers between shown and withheld from frame to frame)
 CAMERA_GAP_S = 1.0  # a camera silent this long is lost (tracking.live.LOST_AFTER_S, the live tracker's)
 NO_ESTIMATE = "no estimate (no camera measured the cone)"
 COLUMNS = ("time", "cone", "dx", "dy", "dz", "sdx", "sdy", "sdz", "cxx", "cxy", "cyy", "cameras", "withheld")
@@ -197,7 +200,20 @@ def no_data_periods(table: pd.DataFrame, start: float, end: float) -> list[Perio
         stop = times[j + 1] if j + 1 < len(times) and times[j + 1] - times[j] <= GAP_S else times[j]
         out.append(Period(float(times[k]), float(max(stop, times[k])), str(why)))
         k = j + 1
-    return sorted(out, key=lambda p: p.start)
+    return merged(sorted(out, key=lambda p: p.start))
+
+
+def merged(periods: list[Period]) -> list[Period]:
+    """Periods of one reason less than MERGE_S apart as one (sorted by start)."""
+    out: list[Period] = []
+    for p in periods:
+        same = [k for k, q in enumerate(out) if q.what == p.what and p.start - q.end < MERGE_S]
+        if same:
+            q = out[same[-1]]
+            out[same[-1]] = Period(q.start, max(q.end, p.end), q.what, q.detail)
+        else:
+            out.append(p)
+    return out
 
 
 def cone_summary(table: pd.DataFrame, cone: str, start: float, end: float) -> ConeSummary:
@@ -263,6 +279,11 @@ def camera_timeline(frames: pd.DataFrame, start: float, end: float, stated: pd.D
     return out
 
 
+def seconds(duration: float) -> str:
+    """A duration for people: hundredths below a second."""
+    return f"{duration:.2f} s" if duration < 1 else f"{duration:.1f} s"
+
+
 def events(cones: list[ConeSummary], cameras: dict[str, list[Period]]) -> list[Event]:
     """The moments to open the recording at, by time: each cone's closest approach, landing, largest excursion and
     NO DATA periods' starts (the whole-record ones left out), each camera's silences."""
@@ -280,9 +301,9 @@ def events(cones: list[ConeSummary], cameras: dict[str, list[Period]]) -> list[E
             out.append(Event(c.excursion.time, c.cone, f"largest excursion after landing: "
                                                        f"{c.excursion.concentricity * 1e3:.0f} mm"))
         if c.verdict != Verdict.NO_DATA:
-            out += [Event(p.start, c.cone, f"NO DATA for {p.duration:.1f} s: {p.what}") for p in c.no_data]
+            out += [Event(p.start, c.cone, f"NO DATA for {seconds(p.duration)}: {p.what}") for p in c.no_data]
     for name, spans in cameras.items():
-        out += [Event(p.start, name, f"{p.what} for {p.duration:.1f} s" + (f" ({p.detail})" if p.detail else ""))
+        out += [Event(p.start, name, f"{p.what} for {seconds(p.duration)}" + (f" ({p.detail})" if p.detail else ""))
                 for p in spans if p.what in (CameraSpan.LOST, CameraSpan.FROZEN, CameraSpan.ENDED)]
     return sorted(out, key=lambda e: (e.time, e.subject))
 

@@ -312,7 +312,8 @@ def read_archive(path: Path, key: Path | None = None) -> InstallationRecord:
     frames = pd.DataFrame([(ns / NS, h.camera, float(h.markers)) for ns, h in m.health],
                           columns=["time", "camera", "markers"]).sort_values(["time", "camera"]).reset_index(drop=True)
     notes = pd.DataFrame([(ns / NS, text.partition(":")[0], text) for ns, text, level in m.log
-                          if level >= Log.WARNING], columns=["time", "subject", "text"])
+                          if level >= Log.WARNING and not text.startswith("cone ")],  # a cone's state: the plots'
+                         columns=["time", "subject", "text"])
     cameras = _cameras(rig, set(frames["camera"]))
     return InstallationRecord(path, "archive", table, frames,
                               pd.DataFrame(columns=["time", "camera", "state", "detail"]), notes, provenance,

@@ -144,8 +144,7 @@ def timeline_figure(cameras: dict[str, list[Period]], frames: pd.DataFrame, span
         most = max(float(np.nanmax(f["markers"])) if f["markers"].notna().any() else 0.0, 1.0)
         ax.plot(f["time"], k + 0.35 - 0.7 * f["markers"] / most, color="#333333", lw=0.7)
     handles = [Rectangle((0, 0), 1, 1, color=SPAN_COLORS[s]) for s in CameraSpan]
-    ax.legend(handles, [s.value for s in CameraSpan], loc="upper center", bbox_to_anchor=(0.5, -0.35 if len(names) < 3
-                                                                                           else -0.15),
+    ax.legend(handles, [s.value for s in CameraSpan], loc="lower center", bbox_to_anchor=(0.5, 1.0),
               ncols=len(CameraSpan), fontsize=8, frameon=False)
     ax.set_yticks(range(len(names)), names)
     ax.set_ylim(len(names) - 0.5, -0.5)

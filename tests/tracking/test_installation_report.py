@@ -67,11 +67,20 @@ def test_a_cone_lifted_off_and_set_down_again_lands_at_its_last_set_down() -> No
 
 def test_no_data_periods_say_why_and_a_silence_is_no_data_of_its_own() -> None:
     table = lowering(0.05, 0.01, withheld=(2.0, 3.0))
-    table = table[(table["time"] < 6.0) | (table["time"] > 6.0 + 1.5 * GAP_S)]  # no estimate for 1.6 s
+    table = table[(table["time"] < 6.0) | (table["time"] > 6.05 + GAP_S)]  # no estimate for 1.2 s
     c = cone_summary(table, "A", 0.0, 10.0)
     periods = [(round(p.start, 2), round(p.end, 2), p.what) for p in c.no_data]
-    assert periods == [(2.0, 3.0, "σ too large"), (5.9, 7.6, NO_ESTIMATE), (8.0, 10.0, NO_ESTIMATE)]
+    assert periods == [(2.0, 3.0, "σ too large"), (5.9, 7.1, NO_ESTIMATE), (8.0, 10.0, NO_ESTIMATE)]
     assert c.verdict == Verdict.WITHIN and c.shown == pytest.approx(1 - 10 / len(table))
+
+
+def test_a_cone_flickering_at_the_limit_is_one_no_data_period() -> None:
+    table = lowering(0.05, 0.01)
+    flicker = (table["time"] >= 1.0) & (table["time"] < 2.0) & (np.round(table["time"] * 10) % 3 == 0)
+    table.loc[flicker, ["dx", "dy", "dz"]] = np.nan
+    table.loc[flicker, "withheld"] = "σ too large"
+    c = cone_summary(table, "A", 0.0, 8.0)
+    assert [(round(p.start, 1), round(p.end, 1), p.what) for p in c.no_data] == [(1.2, 1.9, "σ too large")]
 
 
 def test_a_cone_never_shown_is_no_data_with_its_reason() -> None:
