@@ -185,8 +185,8 @@ def no_data_periods(table: pd.DataFrame, start: float, end: float) -> list[Perio
     reasons = table["withheld"].fillna("").to_numpy(str)
     out: list[Period] = []
     edges = np.concatenate([[start], times, [end]])
-    for k in np.flatnonzero(np.diff(edges) > GAP_S):
-        out.append(Period(float(edges[k]), float(edges[k + 1]), NO_ESTIMATE))
+    for g in np.flatnonzero(np.diff(edges) > GAP_S):
+        out.append(Period(float(edges[g]), float(edges[g + 1]), NO_ESTIMATE))
     k = 0
     while k < len(times):
         if known[k]:
