@@ -24,6 +24,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: no backend, no display, no figures kept open
 from matplotlib.patches import Rectangle
 
+from tracking.errors import InputError, one_line
 from tracking.estimate import TOLERANCE_M
 from tracking.installation_report import (
     CONFIDENCE_SIGMAS,
@@ -277,9 +278,25 @@ def banner_color(summary: Summary) -> str:
     return "#b03a2e" if any(c.verdict == Verdict.OUTSIDE for c in summary.cones) else "#b07800"
 
 
-def write_report(record: InstallationRecord, out: Path, writer: Callable[[Path, str], None]) -> Summary:
-    """Render a record's report into out with writer (tracking.outputs.write_text: a temporary file renamed);
-    returns its summary."""
+def pdf(html: str) -> bytes:
+    """The page as PDF (A4), laid out by WeasyPrint (no browser); a one-line InputError naming --pdf when WeasyPrint
+    or its Pango library is missing."""
+    try:
+        import weasyprint
+    except (ImportError, OSError) as exc:  # OSError: the package is there, its Pango library is not
+        raise InputError("--pdf", f"needs WeasyPrint and the Pango library ({one_line(str(exc))[:120]}): pip install "
+                                  "'topside[pdf]', and on Debian apt-get install libpango-1.0-0") from None
+    return weasyprint.HTML(string=html).write_pdf()
+
+
+def write_report(record: InstallationRecord, out: Path, writer: Callable[[Path, str], None],
+                 pdf_out: Path | None = None, pdf_writer: Callable[[Path, bytes], None] | None = None) -> Summary:
+    """Render a record's report into out with writer (tracking.outputs.write_text: a temporary file renamed), and as
+    PDF into pdf_out with pdf_writer when given; returns its summary."""
     summary = summarise(record.estimates, record.frames, *record.span, record.cones, record.cameras, record.stated)
-    writer(out, render(record, summary))
+    html = render(record, summary)
+    document = pdf(html) if pdf_out is not None else None  # before anything is written: a missing library is named
+    writer(out, html)
+    if pdf_out is not None and pdf_writer is not None and document is not None:
+        pdf_writer(pdf_out, document)
     return summary

@@ -26,6 +26,15 @@ STRETCH = 4  # the dropout clip's time runs this much slower than the rendered o
 DROPPED = range(3, 9)  # cam-port's frames left out of the dropout clip: 1.9 s of silence
 
 
+def weasyprint_works() -> bool:
+    """Whether `report --pdf` can lay out a PDF here (the pdf extra and its Pango library)."""
+    try:
+        import weasyprint  # noqa: F401
+    except (ImportError, OSError):
+        return False
+    return True
+
+
 def summary_of(record: InstallationRecord) -> Summary:
     return summarise(record.estimates, record.frames, *record.span, record.cones, record.cameras, record.stated)
 
@@ -55,10 +64,17 @@ def test_the_recording_and_its_archive_give_the_same_report(archived: Archived, 
     assert cone.verdict == Verdict.NOT_LANDED  # the clip hovers 0.4 m above cone A
     assert cone.closest is not None and 0.2 < cone.closest.concentricity < 0.35  # the ramp passes ~0.27 m off
     assert [p.what for p in cone.no_data] == ["σ too large"]  # the first frames, before the second camera
-    out = tmp_path / "report.html"
-    proc = subprocess.run([*TOPSIDE, "report", str(archived.mcap), "-o", str(out)], capture_output=True, text=True,
-                          timeout=120, cwd=REPO)
-    assert proc.returncode == 0, proc.stderr
+    out, pdf = tmp_path / "report.html", tmp_path / "report.pdf"
+    proc = subprocess.run([*TOPSIDE, "report", str(archived.mcap), "-o", str(out), "--pdf", str(pdf)],
+                          capture_output=True, text=True, timeout=120, cwd=REPO)
+    if weasyprint_works():
+        assert proc.returncode == 0, proc.stderr
+        assert pdf.read_bytes().startswith(b"%PDF") and pdf.stat().st_size > 50_000  # the page and its plots
+    else:  # the pdf extra or its Pango library missing: one line naming --pdf, nothing written
+        assert proc.returncode == 2 and "--pdf" in proc.stderr and not out.exists()
+        proc = subprocess.run([*TOPSIDE, "report", str(archived.mcap), "-o", str(out)], capture_output=True,
+                              text=True, timeout=120, cwd=REPO)
+        assert proc.returncode == 0, proc.stderr
     assert "cone A: not landed" in proc.stdout
     page = out.read_text()
     assert "Sleipnir" in page and mcap.provenance.configuration_sha256 in page
