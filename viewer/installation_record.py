@@ -21,7 +21,7 @@ import pandas as pd
 import rerun as rr
 import yaml
 from foxglove_schemas_protobuf.Log_pb2 import Log
-from mcap.records import Message
+from mcap.records import Channel, Message
 from rerun.error_utils import RerunWarning
 
 from tracking.errors import InputError
@@ -232,9 +232,9 @@ class _ArchiveMessages:
 
     def take(self, records: list[object]) -> None:
         for r in records:
+            if isinstance(r, Channel):
+                self.topics[r.id] = r.topic
             if not isinstance(r, Message):
-                if hasattr(r, "topic"):
-                    self.topics[r.id] = r.topic
                 continue
             topic = self.topics.get(r.channel_id, "")
             if topic.startswith("/offsets/"):
