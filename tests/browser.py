@@ -242,3 +242,48 @@ def web_viewer(url: str, viewport: dict[str, int] | None = None, scale: float = 
             yield browser
         finally:
             context.close()
+
+
+@dataclass
+class StaticPage:
+    """A file opened offline: what it looked like, what it asked the network for, what it said on its console."""
+
+    image: np.ndarray  # RGB (H, W, 3), the whole page
+    requests: list[str]  # every URL it asked for beyond the file itself (each refused)
+    console: list[str]
+    text: str  # the page's visible text
+
+
+def open_offline(path: Path, out: Path | None = None, width: int = 1100, executable: str | None = None) -> StaticPage:
+    """Open a local HTML file in headless Chromium with every network request refused and recorded; screenshot the
+    whole page (to out as PNG too)."""
+    from playwright.sync_api import sync_playwright
+
+    executable = executable or chromium()
+    if executable is None:
+        raise FileNotFoundError("no chromium executable (apt-get install chromium)")
+    url = Path(path).resolve().as_uri()
+    requests: list[str] = []
+    console: list[str] = []
+
+    def refuse(route: object) -> None:
+        requested = route.request.url
+        if requested == url or requested.startswith("data:"):
+            route.continue_()
+        else:
+            requests.append(requested)
+            route.abort()
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=executable, headless=True, args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": width, "height": 800}, offline=True)
+            page.route("**/*", refuse)
+            page.on("console", lambda m: console.append(m.text))
+            page.goto(url, wait_until="load")
+            png = page.screenshot(path=str(out) if out is not None else None, full_page=True)
+            text = page.inner_text("body")
+        finally:
+            browser.close()
+    image = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
+    return StaticPage(image, requests, console, text)

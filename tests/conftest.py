@@ -1,7 +1,10 @@
-"""Shared fixtures: the real reference data in ../shared/data, and a small rendered installation."""
+"""Shared fixtures: the real reference data in ../shared/data, and a small rendered installation, tracked."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,3 +42,25 @@ def installation(tmp_path_factory: pytest.TempPathFactory) -> Path:
     t = T0 + np.arange(FRAMES) / FPS
     render_installation(folder, motion, {"cam-ahead": t, "cam-port": t + 1 / 30}, PAPER_DIST)
     return folder
+
+
+@dataclass(frozen=True)
+class Archived:
+    """The files of one `topside track --rrd --mcap` run."""
+
+    rrd: Path
+    mcap: Path
+    offsets: Path
+
+
+@pytest.fixture(scope="session")
+def archived(installation: Path, tmp_path_factory: pytest.TempPathFactory) -> Archived:
+    """The installation tracked once per session into a recording, an archive and the offsets CSV."""
+    out = tmp_path_factory.mktemp("archived")
+    proc = subprocess.run([sys.executable, "-m", "tracking.cli", "track", "--rig", str(installation / "rig.yaml"),
+                           "--truth", str(installation / "truth.csv"), "-o", str(out / "offsets.csv"),
+                           "--rrd", str(out / "run.rrd"), "--mcap", str(out / "run.mcap"),
+                           "--vessel", "Sleipnir", "--operator", "J. Doe"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return Archived(out / "run.rrd", out / "run.mcap", out / "offsets.csv")

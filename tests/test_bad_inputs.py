@@ -189,6 +189,16 @@ CASES = [
     Case("verify a missing archive", ["verify", "none.mcap"], ("none.mcap",)),
     Case("verify --key not a key", ["verify", "a.mcap", "--key", "rig.yaml"], ("rig.yaml",),
          write("a.mcap", BINARY)),
+    # report
+    Case("report a missing file", ["report", "none.rrd", "-o", "r.html"], ("none.rrd", "not found")),
+    Case("report a PNG", ["report", "png.rrd", "-o", "r.html"], ("png.rrd", "not a Rerun recording or an MCAP"),
+         write("png.rrd", PNG)),
+    Case("report a truncated recording", ["report", "cut.rrd", "-o", "r.html"], ("cut.rrd", "Rerun recording"),
+         write("cut.rrd", b"RRF2" + BINARY)),
+    Case("report a recording not of topside", ["report", "other.rrd", "-o", "r.html"],
+         ("other.rrd", "archive/inputs"), recording("other.rrd")),
+    Case("report -o the recording", ["report", "run.rrd", "-o", "run.rrd"], ("run.rrd", "--out"),
+         write("run.rrd", BINARY)),
     # view
     Case("view a missing recording", ["view", "none.rrd", "--web"], ("none.rrd",)),
     Case("view a PNG", ["view", "png.rrd", "--web"], ("png.rrd",), write("png.rrd", PNG)),
@@ -272,7 +282,7 @@ def snapshot(folder: Path) -> dict[str, str]:
 def test_at_least_forty_cases_cover_every_command() -> None:
     assert len(CASES) >= 40
     assert {c.args[0] for c in CASES} >= {"track", "detect", "calibrate", "export", "verify", "view", "evaluate",
-                                         "simulate", "live"}
+                                         "simulate", "live", "report"}
     assert len({c.name for c in CASES}) == len(CASES)
 
 

@@ -11,7 +11,8 @@ Entity layout (the jacket frame is the world):
     world/truth/cameras/<camera>         camera pose in the truth log (the simulator's), a frustum
     offsets/<axis>/<cone>/{estimate,truth}, errors/<axis>/<cone>, errors/<axis>/<cone>/{plus,minus}_2sigma (the
     estimate's ±2σ, about zero), uncertainty/<axis>/<cone> (1σ), key (markdown: which colour is what),
-    health/<camera>/..., health/<camera>/video/<count> and .../events (a video's problems), status
+    health/<camera>/..., health/<camera>/video/<count> and .../events (a video's problems), health/<camera>/state
+    (what the live tracker said of a camera: LIVE, FROZEN, LOST, ended, with why), status
 """
 
 from __future__ import annotations
@@ -231,6 +232,14 @@ def log_video_health(rec: rr.RecordingStream, camera: str, video: VideoHealth) -
     if video.news:
         rr.log(f"health/{camera}/video/events", rr.TextLog(f"{video.source}: {'; '.join(video.news)}",
                                                           level=rr.TextLogLevel.WARN), recording=rec)
+
+
+def log_camera_state(rec: rr.RecordingStream, t: float, camera: str, state: str, detail: str = "") -> None:
+    """A camera's state as the live tracker states it, at capture time t: 'state' or 'state: why' (`topside report`
+    names a camera's silences by it)."""
+    set_capture_time(rec, t)
+    level = rr.TextLogLevel.INFO if state in ("live", "starting") else rr.TextLogLevel.WARN
+    rr.log(f"health/{camera}/state", rr.TextLog(f"{state}: {detail}" if detail else state, level=level), recording=rec)
 
 
 def log_marker_frames(rec: rr.RecordingStream, path: str, size: float, T_jacket_marker: dict[int, np.ndarray],

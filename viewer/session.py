@@ -38,6 +38,7 @@ from viewer.recording import (
     StatusBoard,
     log_archive_inputs,
     log_camera_poses,
+    log_camera_state,
     log_estimate_records,
     log_estimates,
     log_frame,
@@ -397,6 +398,9 @@ class Recorder:
                 self.on_estimate(item)
             else:
                 self.on_frame(item)
+        for event in update.events:  # on the live clock: a lost camera's silence is named in the recording
+            if update.now > 0:
+                log_camera_state(self.rec, update.now, event.camera, str(event.state), event.detail)
         self._last_update = update
         self._compactor.poll()
         if update.now - self._board_logged >= BOARD_PERIOD_S:

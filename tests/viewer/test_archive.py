@@ -18,8 +18,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from tests.conftest import FRAMES
-from tests.viewer.conftest import Archived
+from tests.conftest import FRAMES, Archived
 from tracking.camera import load_camera
 from viewer.archive.audit import verify
 from viewer.archive.manifest import load_public_key

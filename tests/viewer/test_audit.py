@@ -15,7 +15,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from tests.viewer.conftest import Archived
+from tests.conftest import Archived
 from viewer.archive.audit import recover, scan, verify
 
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]

@@ -18,7 +18,7 @@ import websockets
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
-from tests.viewer.conftest import Archived
+from tests.conftest import Archived
 from tests.viewer.test_playback import free_port, listening_addresses
 from tracking.rig import load_rig
 from tracking.sim.scenario import load_scenario

@@ -12,9 +12,8 @@ import pandas as pd
 import pytest
 import rerun as rr
 
-from tests.conftest import FRAMES, REPO
+from tests.conftest import FRAMES, REPO, Archived
 from tests.synthetic import CONE_A
-from tests.viewer.conftest import Archived
 from viewer.playback import rerun_binary, rerun_env
 from viewer.readback import chunks_by_entity, component_rows
 

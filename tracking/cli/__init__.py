@@ -7,6 +7,7 @@ lint-imports). Its commands live by group:
     fieldwork.py   calibrate, detect, check, sync, survey (and their tables)
     run.py         track, batch, evaluate, demo (track and batch share one run loop)
     archive.py     export, verify
+    report.py      report
     live.py        live
     view.py        view
     sim.py         simulate
@@ -21,7 +22,7 @@ import sys
 
 import typer
 
-from tracking.cli import archive, fieldwork, live, run, sim, view
+from tracking.cli import archive, fieldwork, live, report, run, sim, view
 from tracking.cli.common import EXIT_INTERRUPTED, err_console, one_line
 from tracking.errors import EXIT_BAD_INPUT, InputError
 
@@ -32,8 +33,9 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     add_completion=False,
 )
-for command in (fieldwork.calibrate, fieldwork.detect, run.track, run.batch, archive.export, archive.verify, view.view,
-                live.live, fieldwork.sync, fieldwork.survey, sim.simulate, run.evaluate, fieldwork.check, run.demo):
+for command in (fieldwork.calibrate, fieldwork.detect, run.track, run.batch, archive.export, archive.verify,
+                report.report, view.view, live.live, fieldwork.sync, fieldwork.survey, sim.simulate, run.evaluate,
+                fieldwork.check, run.demo):
     app.command()(command)  # in this order in `topside --help`
 
 
