@@ -29,10 +29,11 @@ from tracking.estimator.noise import (
     REPORT_WARMUP_S,
     REPORT_WARMUP_SIGMA_M,
     STATE,
-    camera_process_noise,
+    block_noises,
+    camera_psds,
     fits_its_corners,
     prior_covariance,
-    process_noise,
+    topside_psds,
 )
 from tracking.estimator.placement import camera_covariance, place_camera, place_topside
 from tracking.estimator.process import Transition, rate_decay
@@ -54,11 +55,12 @@ class TopsideFilter(FilterState):
         a_cam, b_cam = rate_decay(dt, CAMERA_RATE_TAU_S)  # the topside keeps its speed, cameras' rates revert
         a, b = np.full((blocks, 6), a_cam), np.full((blocks, 6), b_cam)
         a[0], b[0] = 1.0, dt
-        noise = np.zeros((blocks, STATE, STATE))
-        noise[0] = process_noise(dt, self.tuning)
+        psds = np.zeros((blocks, 6))  # a camera not placed: none
+        psds[0] = topside_psds(self.tuning)
         for k, cam in enumerate(self.cameras.values()):
             if cam.T_jacket_camera is not None:
-                noise[1 + k] = camera_process_noise(dt, self.tuning, cam.mount, cam.motion_scale)
+                psds[1 + k] = camera_psds(self.tuning, cam.mount, cam.motion_scale)
+        noise = block_noises(dt, psds)
         bodies = Transition(a, b, noise, np.ones(self.size - self.body_size))
         self.x = bodies.apply(self.x[:, None])[:, 0]
         self.P = bodies.covariance(self.P)
@@ -231,22 +233,24 @@ class TopsideFilter(FilterState):
             covs = covs + clock**2 * (speeds[:, :, None] * speeds[:, None, :]
                                       + H[:, :, :6] @ P[6:STATE, 6:STATE] @ H[:, :, :6].transpose(0, 2, 1))
         offsets = H @ x[:STATE]
-        for cone, offset, cov, timed in zip(names, offsets, covs, timeds, strict=True):
-            withheld = self._withheld(offset, cov, timed, limit)
+        sds = np.sqrt(np.diagonal(covs, axis1=1, axis2=2)).tolist()  # (C, 3) σ per axis, and with exact clocks
+        timed_sds = sds if timeds is covs else np.sqrt(np.diagonal(timeds, axis1=1, axis2=2)).tolist()
+        for cone, offset, cov, sd, timed_sd in zip(names, offsets, covs, sds, timed_sds, strict=True):
+            withheld = self._withheld(float(offset[2]), sd, timed_sd, limit)
             offset = np.full(3, np.nan) if withheld else offset
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))
         return out
 
-    def _withheld(self, offset: np.ndarray, cov: np.ndarray, timed: np.ndarray, limit: float) -> str:
-        """Why a cone's offset (3,) of covariance cov (3, 3) is not shown (empty: it is): a rig error, or σ beyond
-        limit (the clocks' fault when its covariance with exact clocks, timed, would have been shown)."""
+    def _withheld(self, dz: float, sd: list[float], timed_sd: list[float], limit: float) -> str:
+        """Why a cone's offset of Δz dz and σ per axis sd (3,) is not shown (empty: it is): a rig error, or σ beyond
+        limit (the clocks' fault when its σ with exact clocks, timed_sd, would have been shown)."""
         if self.scale.mismatch:  # every offset scaled
             return WITHHELD_SCALE
-        if below_cones(float(offset[2]), float(np.sqrt(cov[2, 2]))):  # no set-down can be there
-            self.below = (self.below[0] + 1, min(self.below[1], float(offset[2])))
+        if below_cones(dz, sd[2]):  # no set-down can be there
+            self.below = (self.below[0] + 1, min(self.below[1], dz))
             return WITHHELD_BELOW
-        if np.sqrt(np.diag(cov)).max() > limit:
-            return WITHHELD_CLOCKS if np.sqrt(np.diag(timed)).max() <= limit else WITHHELD_SIGMA
+        if max(sd) > limit:
+            return WITHHELD_CLOCKS if max(timed_sd) <= limit else WITHHELD_SIGMA
         return ""
 
 

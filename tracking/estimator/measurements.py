@@ -82,6 +82,7 @@ def predict_corners(s: FilterState, nominal: np.ndarray, index: int, marker: int
     return (uv[:, :2] / uv[:, 2:3]).reshape(-1)
 
 
+_EYE8 = np.eye(VIEW)  # a view's bias enters its corners one to one (read only)
 _UNIT = np.repeat(np.eye(3)[:, None, :], 4, axis=1)  # (3, 4, 3) ∂(corner + δ)/∂δ_k of four corners: [k, n] = e_k
 
 
@@ -154,7 +155,8 @@ def renew(s: FilterState, frame: list[BodyObservation]) -> np.ndarray:
         s.x[nb:] *= keep  # arrays that nothing else holds
         s.P[nb:, :] *= keep[:, None]
         s.P[:, nb:] *= keep
-        s.P[nb:, nb:] += np.diag((1.0 - keep**2) * VIEW_BIAS_PX**2)
+        d = np.arange(nb, s.size)
+        s.P[d, d] += (1.0 - keep**2) * VIEW_BIAS_PX**2
     return keep
 
 
@@ -166,11 +168,13 @@ def _renewed(s: FilterState, o: BodyObservation) -> list[tuple[ViewBias, float]]
     if cam is None or cam.T_jacket_camera is None:
         return []
     out = []
-    T_camera_jacket = inverse(camera_pose(cam.T_jacket_camera, cam.index, s.x))
+    T_camera_jacket = None  # the camera's pose, once a view needs it
     for marker in o.corners:
         v = s.views.get((o.camera, marker))
         if v is None or v.time == o.time or (marker in s.topside_corners and not s.topside_placed):
             continue
+        if T_camera_jacket is None:
+            T_camera_jacket = inverse(camera_pose(cam.T_jacket_camera, cam.index, s.x))
         h = predict_corners(s, cam.T_jacket_camera, cam.index, marker, s.x, o.K, T_camera_jacket)
         travel = float(np.linalg.norm((h - v.corners).reshape(4, 2), axis=1).mean())
         by_travel, by_time = np.exp(-travel / VIEW_BIAS_RENEW_PX), np.exp(-(o.time - v.time) / VIEW_BIAS_TAU_S)
@@ -193,7 +197,7 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
         h, J = corner_jacobian(s, placed(cam), cam.index, marker, s.x, K, cols)
         v = views[marker]
         idx = [*cols, *range(v, v + VIEW)]
-        H = np.hstack([J, np.eye(VIEW)])  # (8, |idx|)
+        H = np.hstack([J, _EYE8])  # (8, |idx|)
         y = z.reshape(-1) - h - s.x[v:v + VIEW]
         HPH = H @ s.P[np.ix_(idx, idx)] @ H.T
         R = _corner_covariance(s, cam, J, HPH, y, topside)
@@ -218,7 +222,7 @@ def _corner_covariance(s: FilterState, cam: CameraState, J: np.ndarray, HPH: np.
                        topside: bool) -> np.ndarray:
     """(8, 8) noise of a marker's corners: CORNER_NOISE_PX or the camera model's own RMS error, a topside seen up to its
     camera clock's σ early or late, and a corner far off (rain, glare) counted as if at the Huber threshold."""
-    R = max(CORNER_NOISE_PX, cam.model_px) ** 2 * np.eye(8)
+    R = max(CORNER_NOISE_PX, cam.model_px) ** 2 * _EYE8
     if topside and s.clock_sigma.get(cam.name):  # a clock known to σ_t: the topside seen up to σ_t early
         moved = J[:, :6] @ s.x[6:12] * s.clock_sigma[cam.name]  # or late, (8,) px along its motion
         R += np.outer(moved, moved)  # (cone_estimates adds what the cameras' clocks share)

@@ -97,26 +97,43 @@ class FilterTuning:
 
 
 
+def block_noises(dt: float, psds: np.ndarray) -> np.ndarray:
+    """(B, 12, 12) white-noise-acceleration process noise of B bodies, psds (B, 6) per pose axis."""
+    q = np.asarray(psds, dtype=float).reshape(-1, 6)
+    Q = np.zeros((len(q), STATE, STATE))
+    i = np.arange(6)
+    Q[:, i, i] = q * dt**3 / 3
+    Q[:, i, i + 6] = Q[:, i + 6, i] = q * dt**2 / 2
+    Q[:, i + 6, i + 6] = q * dt
+    return Q
+
+
 def block_noise(dt: float, psds: list[float]) -> np.ndarray:
     """(12, 12) white-noise-acceleration process noise of one body, psds (6,) per pose axis."""
-    Q = np.zeros((STATE, STATE))
-    for i, q in enumerate(psds):
-        Q[i, i] = q * dt**3 / 3
-        Q[i, i + 6] = Q[i + 6, i] = q * dt**2 / 2
-        Q[i + 6, i + 6] = q * dt
-    return Q
+    return block_noises(dt, np.asarray(psds))[0]
+
+
+def topside_psds(tuning: FilterTuning) -> list[float]:
+    """(6,) the topside's acceleration psds per pose axis (translation first)."""
+    return [tuning.accel_psd] * 3 + [tuning.angular_accel_psd] * 3
+
+
+def camera_psds(tuning: FilterTuning, mount: str, scale: float = 1.0) -> list[float]:
+    """(6,) a camera's acceleration psds on a mount (rotation first, then position), scaled by the share of the
+    mount's motion the camera shows (1: all of it)."""
+    m = tuning.motion(mount)
+    return [scale * m.angular_accel_psd] * 3 + [scale * m.accel_psd] * 3
 
 
 def process_noise(dt: float, tuning: FilterTuning) -> np.ndarray:
     """(12, 12) white-noise-acceleration process noise of the topside over dt seconds."""
-    return block_noise(dt, [tuning.accel_psd] * 3 + [tuning.angular_accel_psd] * 3)
+    return block_noise(dt, topside_psds(tuning))
 
 
 def camera_process_noise(dt: float, tuning: FilterTuning, mount: str, scale: float = 1.0) -> np.ndarray:
     """(12, 12) process noise of one camera on a mount over dt seconds (rotation first, then position),
     scaled by the share of the mount's motion the camera shows (1: all of it)."""
-    m = tuning.motion(mount)
-    return block_noise(dt, [scale * m.angular_accel_psd] * 3 + [scale * m.accel_psd] * 3)
+    return block_noise(dt, camera_psds(tuning, mount, scale))
 
 
 def prior_covariance(tuning: FilterTuning) -> np.ndarray:

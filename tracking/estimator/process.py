@@ -69,18 +69,21 @@ class Transition:
     def apply(self, M: np.ndarray) -> np.ndarray:
         """F M for M (n, k)."""
         out = _body_rows(M, self.a, self.b)
-        out[self.a.size * 2:] *= self.keep[:, None]
+        if (self.keep < 1.0).any():  # (all kept between a frame's prediction and its views' renewal)
+            out[self.a.size * 2:] *= self.keep[:, None]
         return out
 
     def covariance(self, P: np.ndarray) -> np.ndarray:
         """F P Fᵀ + Q for a covariance P (n, n)."""
         out = self.apply(P)
         _body_columns(out, self.a, self.b)
-        out[:, self.a.size * 2:] *= self.keep[None, :]
         for k, Q in enumerate(self.noise):
             out[STATE * k:STATE * (k + 1), STATE * k:STATE * (k + 1)] += Q
-        nb = self.a.size * 2
-        out[nb:, nb:] += np.diag((1.0 - self.keep**2) * VIEW_BIAS_PX**2)
+        if (self.keep < 1.0).any():
+            nb = self.a.size * 2
+            out[:, nb:] *= self.keep[None, :]
+            d = np.arange(nb, len(out))
+            out[d, d] += (1.0 - self.keep**2) * VIEW_BIAS_PX**2
         return out
 
 

@@ -37,6 +37,9 @@ def one_blas_thread() -> None:
         _blas_limited = True
 
 
+_EYE4 = np.eye(4)  # copied: cheaper than a new identity, per frame and camera
+
+
 def point_offset_matrix(r: np.ndarray) -> np.ndarray:
     """(3, 12) H: offset of a topside point at r (3,) from the topside state, o = t - [r]× ω."""
     H = np.zeros((3, STATE))
@@ -117,7 +120,7 @@ class ConsiderStates:
 
 def camera_pose(nominal: np.ndarray, index: int, x: np.ndarray) -> np.ndarray:
     """(4, 4) T_jacket_camera of a camera at nominal T_jacket_camera (4, 4) whose error states start at index in x."""
-    T = np.eye(4)
+    T = _EYE4.copy()
     T[:3, :3] = rotation(x[index:index + 3]) @ nominal[:3, :3]
     T[:3, 3] = nominal[:3, 3] + x[index + 3:index + 6]
     return T
@@ -125,7 +128,7 @@ def camera_pose(nominal: np.ndarray, index: int, x: np.ndarray) -> np.ndarray:
 
 def topside_pose(x: np.ndarray) -> np.ndarray:
     """(4, 4) T_jacket_topside of a state."""
-    T = np.eye(4)
+    T = _EYE4.copy()
     T[:3, :3] = rotation(x[3:6])
     T[:3, 3] = x[:3]
     return T
