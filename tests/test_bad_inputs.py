@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import os
+import re
 import shutil
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +20,7 @@ import pytest
 import yaml
 
 from tests.conftest import FPS, FRAMES, T0, motion
+from tracking.cli.common import PROGRESS_INTERVAL_ENV
 
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4
@@ -315,3 +319,81 @@ def test_a_marker_on_a_cone_not_in_cones_is_warned_of(pairs: bool, does: str, in
     warned = [line for line in proc.stderr.splitlines() if "markers[3].cone" in line]
     assert warned == [f"topside: warning: bad-rig.yaml: markers[3].cone: B is not in cones, and no pair is on it; "
                       f"{does}"], proc.stderr
+
+
+# --- what a crew reads without a terminal (a log on the vessel, nohup, a pipe) ---------------------------------------
+
+PROGRESS_LINE = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3}) topside: (.+)$")
+LONG_NAME = "drone_port_forward_upper_deck_camera_with_a_name_no_one_would_type"  # a table of it passes 80 columns
+
+
+def piped(args: list[str], folder: Path, interval_s: float) -> tuple[int, str, list[tuple[float, str]]]:
+    """A command with stdout and stderr pipes (no terminal, no COLUMNS) and progress every interval_s: its exit
+    status, its stdout, and each stderr line with the wall time it arrived."""
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    env[PROGRESS_INTERVAL_ENV] = str(interval_s)
+    proc = subprocess.Popen([*TOPSIDE, *args], cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env)
+    assert proc.stderr is not None and proc.stdout is not None
+    lines = [(time.time(), line.rstrip("\n")) for line in proc.stderr]
+    out = proc.stdout.read()
+    return proc.wait(timeout=120), out, lines
+
+
+def test_a_piped_track_prints_timestamped_progress_and_whole_tables(installation: Path, tmp_path: Path) -> None:
+    """track with its output piped: a timestamped progress line as it starts, then at least every interval (10 s
+    by default; 0.2 s here), and the last saying it is done; its table not cut at 80 columns."""
+    folder = tmp_path / "work"
+    shutil.copytree(installation, folder)
+    edit_rig(lambda rig: rig["cameras"][0].update(name=LONG_NAME), to="rig.yaml")(folder)
+    interval = 0.2
+    code, out, lines = piped(["track", "--rig", "rig.yaml", "--workers", "2"], folder, interval)
+    assert code == 0, lines
+    progress = [(arrived, PROGRESS_LINE.match(line)) for arrived, line in lines if PROGRESS_LINE.match(line)]
+    assert len(progress) >= 3, lines
+    stamps = [time.mktime(time.strptime(m[1][:19], "%Y-%m-%d %H:%M:%S")) + float(m[1][19:]) for _, m in progress]
+    for (arrived, _), stamp in zip(progress, stamps, strict=True):
+        assert abs(arrived - stamp) < 1.0  # the stamp is the time the line was written
+    gaps = np.diff(stamps)
+    assert gaps.min() >= 0 and gaps.max() < interval + 1.5, gaps  # every interval, give or take a loaded machine
+    assert all(m[2].startswith("tracking 2 cameras: ") for _, m in progress)
+    assert progress[0][1][2].startswith("tracking 2 cameras: 0 of 24 frames (0 %)")
+    assert re.fullmatch(r"tracking 2 cameras: 24 of 24 frames \(100 %\), done in \d+ s", progress[-1][1][2])
+    assert LONG_NAME in out  # the whole name in the table, not 'drone_port_…'
+
+
+@pytest.mark.parametrize("command", ["check", "sync"])
+def test_piped_fieldwork_prints_progress_while_reading_footage(command: str, installation: Path,
+                                                               tmp_path: Path) -> None:
+    """check and sync with their output piped: progress lines counting the frames read, the last once done."""
+    args = {"check": ["check", *RIG], "sync": ["sync", *RIG, "-o", "synced.yaml"]}[command]
+    code, _, lines = piped(args, installation if command == "check" else _copy(installation, tmp_path), 0.2)
+    assert code in (0, 1), lines
+    progress = [m[2] for _, line in lines if (m := PROGRESS_LINE.match(line))]
+    assert progress and re.fullmatch(r".*: 24 frames, done in \d+ s", progress[-1]), lines
+
+
+def _copy(installation: Path, tmp_path: Path) -> Path:
+    folder = tmp_path / "work"
+    shutil.copytree(installation, folder)
+    return folder
+
+
+def test_help_is_whole_at_80_columns() -> None:
+    """Every command's help at 80 columns: nothing cut ('…'), the board's syntax and topside[cluster] whole."""
+    from typer.testing import CliRunner
+
+    from tracking.cli import app
+
+    runner = CliRunner()
+    names = [c.name or c.callback.__name__ for c in app.registered_commands if c.callback is not None]
+    assert len(names) >= 14
+    for name in names:
+        result = runner.invoke(app, [name, "--help"], env={"COLUMNS": "80", "TERMINAL_WIDTH": "80"})
+        assert result.exit_code == 0, result.output
+        assert "…" not in result.output, (name, result.output)
+        assert max(len(line) for line in result.output.splitlines()) <= 80, (name, result.output)
+    calibrate = runner.invoke(app, ["calibrate", "--help"], env={"COLUMNS": "80"}).output
+    assert "chessboard:COLSxROWS:SQUARE" in calibrate and "charuco:COLSxROWS:SQUARE:MARKER:DICT" in calibrate
+    assert "Needs topside[cluster]." in " ".join(runner.invoke(app, ["track", "--help"],
+                                                              env={"COLUMNS": "80"}).output.split())

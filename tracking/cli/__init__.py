@@ -30,6 +30,7 @@ app = typer.Typer(
     help="Watch an offshore topside being set down on its jacket, from cameras.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help (click): paragraphs re-wrapped to the terminal, nothing read as markup
     add_completion=False,
 )
 for command in (fieldwork.calibrate, fieldwork.detect, run.track, run.batch, archive.export, archive.verify, view.view,

@@ -38,22 +38,26 @@ LEARNT_SHARE = 0.25  # a marker whose σ the footage cut by less than this share
 
 def calibrate(
     images: Annotated[list[Path], typer.Argument(help="Photos of the board, one camera, several views.")],
-    board: Annotated[str, typer.Option(help="chessboard:COLSxROWS:SQUARE (inner corners, m) or "
-                                            "charuco:COLSxROWS:SQUARE:MARKER:DICT (squares, m).")],
+    board: Annotated[str, typer.Option(help="The board, as written above: chessboard:... or charuco:...")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Camera file to write (OpenCV YAML).")],
-    fix_aspect: Annotated[bool, typer.Option("--fix-aspect", help="Keep fx = fy (CALIB_FIX_ASPECT_RATIO).")] = False,
+    fix_aspect: Annotated[bool, typer.Option("--fix-aspect", help="Keep fx = fy (OpenCV's fixed aspect ratio).")
+                          ] = False,
     rational: Annotated[bool, typer.Option("--rational", help="8-coefficient rational distortion model.")] = False,
     subpix_window: Annotated[int, typer.Option(help="Half-size of cornerSubPix's window, px (chessboard).",
                                                min=1, max=MAX_SUBPIX_WINDOW)] = SUBPIX_WINDOW,
 ) -> None:
-    """Calibrate one camera from photos of a chessboard or ChArUco board."""
+    """Calibrate one camera from photos of a chessboard or ChArUco board.
+
+    --board is chessboard:COLSxROWS:SQUARE (inner corners across and down, the square's side in m), e.g.
+    chessboard:9x6:0.025; or charuco:COLSxROWS:SQUARE:MARKER:DICT (squares across and down, the square's and the
+    marker's sides in m, the ArUco dictionary), e.g. charuco:7x5:0.04:0.03:DICT_5X5_100."""
     import tracking.calibration as calib
     from tracking.camera import save_camera
 
     spec = calib.parse_board(board)
     check_outputs({"--out": out}, images)
     with progress_bar() as progress:
-        task = progress.add_task("finding the board", total=len(images))
+        task = progress.add_task("finding the board", total=len(images), unit="photos")
         result = calib.calibrate(images, spec, fix_aspect=fix_aspect, rational=rational,
                                  subpix_window=subpix_window, progress=lambda: progress.advance(task))
     _print_calibration(result, len(images), fix_aspect)
@@ -219,8 +223,8 @@ def check(
     warn_rig(the_rig)
     check_outputs({"--rrd": rrd}, rig_inputs(the_rig))
     with progress_bar() as progress:
-        progress.add_task(f"reading {seconds:g} s of {len(the_rig.cameras)} cameras", total=None)
-        report = check_rig(the_rig, seconds, refine)
+        task = progress.add_task(f"reading {seconds:g} s of {len(the_rig.cameras)} cameras", total=None, unit="frames")
+        report = check_rig(the_rig, seconds, refine, on_frame=lambda: progress.advance(task))
     warn_lines(report.warnings)
     _print_check(report)
     if rrd is not None:
@@ -372,8 +376,9 @@ def sync(
                                     f"{', '.join(c.name for c in the_rig.cameras)})", "--reference")
     t0 = time.perf_counter()
     with progress_bar() as progress:
-        progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None)
-        offsets, _, seconds = footage_measurements(the_rig, refine, observations=False)
+        task = progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None, unit="frames")
+        offsets, _, seconds = footage_measurements(the_rig, refine, observations=False,
+                                                   on_frame=lambda _: progress.advance(task))
         t1 = time.perf_counter()
         clocks = synchronise(the_rig, offsets, reference)
     console.print(clock_table(clocks))
@@ -434,8 +439,9 @@ def survey(
         raise InputError("--to", f"{end:g} s is not after --from {start:g} s (expected a stretch of footage)")
     t0 = time.perf_counter()
     with progress_bar() as progress:
-        progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None)
-        offsets, observations, seconds = footage_measurements(the_rig, refine, start, end)
+        task = progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None, unit="frames")
+        offsets, observations, seconds = footage_measurements(the_rig, refine, start, end,
+                                                              on_frame=lambda _: progress.advance(task))
         t1 = time.perf_counter()
         fit = survey_markers(the_rig, [*offsets, *observations])
     console.print(survey_table(the_rig, fit))

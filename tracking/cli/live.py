@@ -38,8 +38,8 @@ FOXGLOVE_PORT_DEFAULT = 8765  # Foxglove's own default for a WebSocket server
 
 RigOption = Annotated[Path, typer.Option(help="Rig file; each camera's source is a device index, a stream URL "
                                               "(rtsp://, http://) or a video file replayed at its frame rate.")]
-RrdOption = Annotated[Path | None, typer.Option(help="Recording to write, in segments <stem>-NNN.rrd (default: "
-                                                     "recordings/live-<date>-<time>.rrd).")]
+RrdOption = Annotated[Path | None, typer.Option(help="Recording to write, in segments STEM-NNN.rrd (default: "
+                                                     "live-DATE-TIME.rrd in recordings/).")]
 OutOption = Annotated[Path | None, typer.Option("-o", "--out", help="Offsets CSV, written as they are measured "
                                                                     "(default: beside the recording).")]
 SpawnOption = Annotated[bool, typer.Option("--spawn", help="Stream to a native viewer.")]

@@ -20,6 +20,7 @@ import typer
 from tracking.cli.archive import ArchiveSettings, archive_sink
 from tracking.cli.common import (
     EXIT_INTERRUPTED,
+    Reporter,
     console,
     err_console,
     one_line,
@@ -49,7 +50,7 @@ from tracking.outputs import Outputs, check_outputs
 
 if TYPE_CHECKING:
     import pandas as pd
-    from rich.progress import Progress, TaskID
+    from rich.progress import TaskID
 
     from tracking.batch import Installation, Outcome
     from tracking.estimate import ConeEstimate
@@ -194,7 +195,7 @@ def track(
             if archive is not None:
                 loop.sinks.append(archive_sink(the_rig, outputs.claim(mcap), options, truth_df, archive, csv))
             task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras",
-                                     total=sum(p.frames for p in plans) or None)
+                                     total=sum(p.frames for p in plans) or None, unit="frames")
             loop.advance = lambda: progress.advance(task)
             loop.write(csv, ESTIMATORS[mode], report)
     except KeyboardInterrupt:
@@ -294,7 +295,8 @@ def batch(
     try:
         with progress_bar() as progress:
             total = sum(p.frames for one in prepared for p in one.plans) or None
-            task = progress.add_task(f"{len(installations)} installations on {run.workers} workers", total=total)
+            task = progress.add_task(f"{len(installations)} installations on {run.workers} workers", total=total,
+                                     unit="frames")
             for one in prepared:
                 progress.update(task, description=f"{one.inst.label} ({len(outcomes) + 1}/{len(installations)})")
                 outcomes.append(_batch_one(one, run, refine, progress, task))
@@ -317,7 +319,7 @@ def _prepare(inst: Installation, chunk_frames: int) -> Prepared:
         return Prepared(inst, None, [], one_line(exc))
 
 
-def _batch_one(one: Prepared, run: Runner, refine: Refinement, progress: Progress, task: TaskID) -> Outcome:
+def _batch_one(one: Prepared, run: Runner, refine: Refinement, progress: Reporter, task: TaskID) -> Outcome:
     """One installation of a batch: its outputs, or its one-line failure (the frames it did not track are counted
     off the progress bar)."""
     import time
@@ -452,16 +454,26 @@ def demo(
     from viewer.playback import has_display
 
     scene = out / "demo"
-    console.rule(f"1/3 simulate {DEMO_SCENARIO} ({duration:.0f} s)")
+    _rule(f"1/3 simulate {DEMO_SCENARIO} ({duration:.0f} s)")
     run_simulate(DEMO_SCENARIO, scene, seed=None, duration=duration)
-    console.rule("2/3 track (all cameras fused) and record")
+    _rule("2/3 track (all cameras fused) and record")
     rrd = out / "demo.rrd"
     csv = out / "demo-offsets.csv"
     track(rig=scene / "rig.yaml", out=csv, mode=Mode.FUSED, refine=DEFAULT_REFINEMENT, rrd=rrd,
           truth=scene / "truth.csv", rejected=False)
-    console.rule("3/3 accuracy against the simulator's truth")
+    _rule("3/3 accuracy against the simulator's truth")
     evaluate(runs=[csv, scene / "truth.csv"], name="demo", markdown=out / "demo-accuracy.md", plots=None)
     if not no_viewer and has_display():
         view(recording=rrd, start=None, end=None, web=False, bind="127.0.0.1")
     else:
         console.print(f"open the recording with:  .venv/bin/topside view {rrd}   (or --web for a browser)")
+
+
+RULE_WIDTH = 100  # columns of the demo's step rules at most (a log's console is far wider: common.LOG_WIDTH)
+
+
+def _rule(title: str) -> None:
+    """A step's rule across the terminal, or RULE_WIDTH columns in a log."""
+    from rich.rule import Rule
+
+    console.print(Rule(title), width=min(console.width, RULE_WIDTH))
