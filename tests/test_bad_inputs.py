@@ -397,3 +397,13 @@ def test_help_is_whole_at_80_columns() -> None:
     assert "chessboard:COLSxROWS:SQUARE" in calibrate and "charuco:COLSxROWS:SQUARE:MARKER:DICT" in calibrate
     assert "Needs topside[cluster]." in " ".join(runner.invoke(app, ["track", "--help"],
                                                               env={"COLUMNS": "80"}).output.split())
+
+
+def test_version() -> None:
+    """topside --version: one line, topside's installed version and what decides its numbers; exit 0."""
+    from importlib.metadata import version
+
+    proc = subprocess.run([*TOPSIDE, "--version"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count("\n") == 1 and not proc.stderr
+    assert proc.stdout.startswith(f"topside {version('topside')} (Python {sys.version.split()[0]}, opencv ")
