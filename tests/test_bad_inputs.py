@@ -91,6 +91,15 @@ def offsets_csv(shift_s: float = 0.0, cone: str = "A") -> str:
     return "\n".join(rows) + "\n"
 
 
+def private_key(path: Path) -> None:
+    """An ed25519 private key in PEM, as `openssl genpkey -algorithm ed25519` writes it."""
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
+    path.write_bytes(Ed25519PrivateKey.generate().private_bytes(
+        serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))
+
+
 def nan_centre(rig: dict) -> None:
     rig["markers"][0]["center"][1] = float("nan")
 
@@ -193,6 +202,9 @@ CASES = [
     Case("verify a missing archive", ["verify", "none.mcap"], ("none.mcap",)),
     Case("verify --key not a key", ["verify", "a.mcap", "--key", "rig.yaml"], ("rig.yaml",),
          write("a.mcap", BINARY)),
+    Case("verify --key a private key", ["verify", "a.mcap", "--key", "private.pem"],
+         ("private.pem", "is a private key", "openssl pkey -in private.pem -pubout -out public.pem"),
+         both(write("a.mcap", BINARY), lambda f: private_key(f / "private.pem"))),
     # view
     Case("view a missing recording", ["view", "none.rrd", "--web"], ("none.rrd",)),
     Case("view a PNG", ["view", "png.rrd", "--web"], ("png.rrd",), write("png.rrd", PNG)),
