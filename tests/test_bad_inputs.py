@@ -223,6 +223,10 @@ CASES = [
     Case("track --ray malformed", ["track", *RIG, "--ray", "ray://host:port"], ("--ray", "ray://host:port",
                                                                                "expected ray://HOST:PORT")),
     Case("track --ray no port", ["track", *RIG, "--ray", "nonsense"], ("--ray", "nonsense", "not a Ray address")),
+    # batch
+    Case("batch with a name given twice", ["batch", "m.yaml"],
+         ("m.yaml", "installations[1].name", "'A' is also installations[0]'s name"),
+         write("m.yaml", "- {rig: rig.yaml, out: one, name: A}\n- {rig: rig.yaml, out: two, name: A}\n")),
     # evaluate
     Case("evaluate without truth", ["evaluate", "offsets.csv"], ("offsets.csv",),
          write("offsets.csv", offsets_csv())),
