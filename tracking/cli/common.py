@@ -104,10 +104,11 @@ class _Task:
 
 
 class ProgressLines:
-    """Progress as plain lines on stderr for a log: one when a task starts or is renamed, then one every interval s
-    from a thread (whether or not the work advanced: a line that stops coming means the command stopped), and one
-    when the work ends. Each line: local date and time to the millisecond, then the task, its count and the time
-    it has taken, e.g. '2026-05-04 03:12:07.415 topside: tracking 4 cameras: 1200 of 4800 frames (25 %), 31 s'."""
+    """Progress as plain lines on stderr for a log: one per task every interval s from a thread (whether or not the
+    work advanced: a line that stops coming means the command stopped), and one when the work has ended well. Each
+    line: local date and time to the millisecond, then the task, its count and the time it has taken, e.g.
+    '2026-05-04 03:12:07.415 topside: tracking 4 cameras: 1200 of 4800 frames (25 %), 31 s'. Nothing is printed
+    before the first interval, so bad input found at once is still the one line on stderr."""
 
     def __init__(self, interval_s: float = PROGRESS_INTERVAL_S) -> None:
         self.interval_s = interval_s
@@ -130,28 +131,24 @@ class ProgressLines:
             self._print_all(ended=True)
 
     def add_task(self, description: str, total: float | None = None, unit: str = "", **fields: Any) -> int:
-        """A task (its number), announced at once. unit: what is counted ('frames'), for the lines."""
+        """A task (its number). unit: what is counted ('frames'), for the lines."""
         with self._lock:
             self._tasks.append(_Task(description, total, unit))
-            task = len(self._tasks) - 1
-        self._print(self._tasks[task])
-        return task
+            return len(self._tasks) - 1
 
     def advance(self, task_id: int, advance: float = 1) -> None:
         with self._lock:
             self._tasks[task_id].done += advance
 
     def update(self, task_id: int, description: str | None = None, total: float | None = None,
-               advance: float | None = None, **fields: Any) -> None:
-        """As rich's: a new description (announced), total or advance."""
+               advance: float | None = None, unit: str | None = None, **fields: Any) -> None:
+        """As rich's: a new description, total, advance or unit."""
         with self._lock:
             task = self._tasks[task_id]
-            renamed = description is not None and description != task.description
             task.description = description if description is not None else task.description
             task.total = total if total is not None else task.total
+            task.unit = unit if unit is not None else task.unit
             task.done += advance or 0.0
-        if renamed:
-            self._print(task)
 
     def _tick(self) -> None:
         while not self._stop.wait(self.interval_s):

@@ -89,6 +89,8 @@ def _print_calibration(result: CalibrationResult, n_images: int, fix_aspect: boo
                                                          " (σ not estimated)"))
     if result.missed:
         console.print(f"no board found in {len(result.missed)}: {', '.join(result.missed)}", style="yellow")
+    for photo, first in result.repeated.items():
+        warn_lines([f"{photo}: the board where {first} has it (the same pose: the view adds nothing)"])
     if result.coverage < calib.COVERAGE_WARN:
         console.print(f"warning: the board covered only {result.coverage:.0%} of the image "
                       "(corners and edges unseen); distortion is poorly determined there", style="yellow")

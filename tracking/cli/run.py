@@ -184,18 +184,19 @@ def track(
     archive = ArchiveSettings.for_track(mcap, key, vessel, operator, video)  # before any work
     options = {"mode": mode.value, "refine": refine.value, **({"roi": "on"} if roi else {})}
     report = FilterReport()
-    plans = plan_rig(the_rig, chunk_frames=chunk_frames)
     outputs = Outputs(keep_on_interrupt=True)
-    loop = RunLoop(the_rig, runner(workers, ray), refine, plans, TrackStats(), roi=roi, warn=True)
+    loop = RunLoop(the_rig, runner(workers, ray), refine, [], TrackStats(), roi=roi, warn=True)
     try:
         with outputs, progress_bar() as progress:
+            task = progress.add_task(f"finding the keyframes of {len(the_rig.cameras)} videos", total=None)
+            loop.plans = plan_rig(the_rig, chunk_frames=chunk_frames)
+            progress.update(task, description=f"tracking {len(the_rig.cameras)} cameras",
+                            total=sum(p.frames for p in loop.plans) or None, unit="frames")
             csv = outputs.claim(out)
             if rrd is not None:
                 loop.sinks.append(recorder(the_rig, outputs.claim(rrd), truth_df, options, show_rejected=rejected))
             if archive is not None:
                 loop.sinks.append(archive_sink(the_rig, outputs.claim(mcap), options, truth_df, archive, csv))
-            task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras",
-                                     total=sum(p.frames for p in plans) or None, unit="frames")
             loop.advance = lambda: progress.advance(task)
             loop.write(csv, ESTIMATORS[mode], report)
     except KeyboardInterrupt:
@@ -288,15 +289,15 @@ def batch(
     from tracking.parallel import runner
 
     installations = load_manifest(manifest)
-    prepared = [_prepare(inst, chunk_frames) for inst in installations]  # every rig and keyframe read before any work
     run = runner(workers, ray)
     outcomes: list[Outcome] = []
     started = time.perf_counter()
     try:
         with progress_bar() as progress:
-            total = sum(p.frames for one in prepared for p in one.plans) or None
-            task = progress.add_task(f"{len(installations)} installations on {run.workers} workers", total=total,
-                                     unit="frames")
+            task = progress.add_task(f"finding the keyframes of {len(installations)} installations", total=None)
+            prepared = [_prepare(inst, chunk_frames) for inst in installations]  # every rig and keyframe, first
+            progress.update(task, description=f"{len(installations)} installations on {run.workers} workers",
+                            total=sum(p.frames for one in prepared for p in one.plans) or None, unit="frames")
             for one in prepared:
                 progress.update(task, description=f"{one.inst.label} ({len(outcomes) + 1}/{len(installations)})")
                 outcomes.append(_batch_one(one, run, refine, progress, task))
