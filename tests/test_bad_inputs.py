@@ -115,6 +115,17 @@ def private_key(path: Path) -> None:
         serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))
 
 
+def warning_rig(change: Callable[[dict], None] | None = None) -> Callable[[Path], None]:
+    """A preparation writing w.yaml: the rig with cameras[0].mount left out (a warning at every load), changed."""
+
+    def edit(rig: dict) -> None:
+        del rig["cameras"][0]["mount"]
+        if change is not None:
+            change(rig)
+
+    return edit_rig(edit, to="w.yaml")
+
+
 def nan_centre(rig: dict) -> None:
     rig["markers"][0]["center"][1] = float("nan")
 
@@ -291,6 +302,22 @@ CASES = [
     Case("survey --to nan", ["survey", *RIG, "-o", "s.yaml", "--to", "nan"], ("--to", "not a finite number")),
     Case("survey --to inf", ["survey", *RIG, "-o", "s.yaml", "--to", "inf"], ("--to", "not a finite number")),
     Case("survey without survey_sigma", ["survey", *RIG, "-o", "s.yaml"], ("rig.yaml", "survey_sigma")),
+    # a rig that warns (a camera without its mount): the error alone, the warnings never before it
+    Case("survey without survey_sigma, a rig that warns", ["survey", "--rig", "w.yaml", "-o", "s.yaml"],
+         ("w.yaml", "survey_sigma", "no marker to survey"), warning_rig()),
+    Case("sync --reference unknown, a rig that warns", ["sync", "--rig", "w.yaml", "-o", "s.yaml", "--reference",
+                                                         "nope"], ("nope", "--reference"), warning_rig()),
+    Case("check --rrd the rig, a rig that warns", ["check", "--rig", "w.yaml", "--rrd", "w.yaml"], ("w.yaml", "--rrd"),
+         warning_rig()),
+    Case("track with a missing video, a rig that warns", ["track", "--rig", "w.yaml"], ("gone.mp4",),
+         warning_rig(lambda rig: rig["cameras"][1].update(source="gone.mp4"))),
+    Case("track -o the rig, a rig that warns", ["track", "--rig", "w.yaml", "-o", "w.yaml"], ("w.yaml", "--out"),
+         warning_rig()),
+    Case("live --rrd beside an earlier session, a rig that warns", ["live", "--rig", "w.yaml", "--rrd", "s.rrd"],
+         ("s-offsets.csv", "earlier"), both(warning_rig(), write("s-offsets.csv", "time,cone\n"))),
+    Case("detect --dictionary not the rig's, a rig that warns", ["detect", "cam-ahead.mp4", "--rig", "w.yaml",
+                                                                  "--dictionary", "DICT_4X4_50"], ("--dictionary",),
+         warning_rig()),
 ]
 
 

@@ -115,11 +115,11 @@ def detect(
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig) if rig else None
-    if the_rig is not None:
-        warn_rig(the_rig)
     if dictionary and the_rig and dictionary != the_rig.dictionary:
         raise InputError("--dictionary", f"{dictionary} differs from the rig's {the_rig.dictionary}")
     cam = load_camera(camera) if camera else None
+    if the_rig is not None:
+        warn_rig(the_rig)  # once the inputs are accepted: bad input stays the one line on stderr
     detector = MarkerDetector(dictionary or (the_rig.dictionary if the_rig else "DICT_6X6_250"), refine, cam,
                               inverted=inverted or bool(the_rig and the_rig.inverted))
     size = marker_size or (the_rig.marker_size if the_rig else 1.0)
@@ -222,8 +222,8 @@ def check(
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_outputs({"--rrd": rrd}, rig_inputs(the_rig))
+    warn_rig(the_rig)
     with progress_bar() as progress:
         task = progress.add_task(f"reading {seconds:g} s of {len(the_rig.cameras)} cameras", total=None, unit="frames")
         report = check_rig(the_rig, seconds, refine, on_frame=lambda: progress.advance(task))
@@ -371,11 +371,11 @@ def sync(
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_outputs({"--out": out}, rig_inputs(the_rig))
     if reference is not None and reference not in {c.name for c in the_rig.cameras}:
         raise InputError(reference, f"is not a camera of {rig} (expected one of "
                                     f"{', '.join(c.name for c in the_rig.cameras)})", "--reference")
+    warn_rig(the_rig)
     t0 = time.perf_counter()
     with progress_bar() as progress:
         task = progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None, unit="frames")
@@ -432,13 +432,14 @@ def survey(
 
     from tracking.fieldwork import footage_measurements, write_rig
     from tracking.rig import load_rig
-    from tracking.survey import survey_markers, surveyed_rig
+    from tracking.survey import survey_markers, surveyable, surveyed_rig
 
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_outputs({"--out": out}, rig_inputs(the_rig))
     if start is not None and end is not None and end <= start:
         raise InputError("--to", f"{end:g} s is not after --from {start:g} s (expected a stretch of footage)")
+    surveyable(the_rig)  # a rig with nothing to survey is refused before any footage is read
+    warn_rig(the_rig)
     t0 = time.perf_counter()
     with progress_bar() as progress:
         task = progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None, unit="frames")

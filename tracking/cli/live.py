@@ -94,10 +94,10 @@ def live(
     if spawn and web:
         raise InputError("--spawn/--web", "choose one viewer")
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_sources(the_rig)  # a missing or unreadable video, or files mixed with devices: refused before any file
     rrd, out = _session_files(the_rig, rrd, out)
     fox_address = _check_ports(bind, spawn, web, foxglove, port, grpc_port, web_port)
+    warn_rig(the_rig)  # once the inputs are accepted: bad input stays the one line on stderr
     viewer_process = start_live_viewer(web, bind, grpc_port, web_port) if spawn or web else None
     if web:
         console.print(f"web viewer: {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}")

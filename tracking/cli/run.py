@@ -178,7 +178,6 @@ def track(
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_outputs({"--out": out, "--rrd": rrd, "--mcap": mcap}, [*rig_inputs(the_rig), truth, key])
     truth_df = read_truth(truth) if truth else None
     archive = ArchiveSettings.for_track(mcap, key, vessel, operator, video)  # before any work
@@ -190,6 +189,7 @@ def track(
         with outputs, progress_bar() as progress:
             task = progress.add_task(f"finding the keyframes of {len(the_rig.cameras)} videos", total=None)
             loop.plans = plan_rig(the_rig, chunk_frames=chunk_frames)
+            warn_rig(the_rig)  # once every input is read: bad input stays the one line on stderr
             progress.update(task, description=f"tracking {len(the_rig.cameras)} cameras",
                             total=sum(p.frames for p in loop.plans) or None, unit="frames")
             csv = outputs.claim(out)
