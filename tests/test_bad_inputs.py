@@ -21,6 +21,7 @@ import yaml
 
 from tests.conftest import FPS, FRAMES, T0, motion
 from tracking.cli.common import PROGRESS_INTERVAL_ENV
+from tracking.parallel import RAY_CONNECT_TIMEOUT_ENV
 
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4
@@ -253,6 +254,8 @@ CASES = [
     Case("track --ray malformed", ["track", *RIG, "--ray", "ray://host:port"], ("--ray", "ray://host:port",
                                                                                "expected ray://HOST:PORT")),
     Case("track --ray no port", ["track", *RIG, "--ray", "nonsense"], ("--ray", "nonsense", "not a Ray address")),
+    Case("track --ray a port nobody listens on", ["track", *RIG, "--ray", "127.0.0.1:1"],
+         ("--ray", "127.0.0.1:1 does not answer", "expected a Ray cluster's head")),
     # batch
     Case("batch with a name given twice", ["batch", "m.yaml"],
          ("m.yaml", "installations[1].name", "'A' is also installations[0]'s name"),
@@ -485,3 +488,33 @@ def test_calibrate_warns_of_a_photo_repeating_another(shared_data: Path, tmp_pat
     assert [line for line in proc.stderr.splitlines() if "warning" in line] == [
         "topside: warning: again.jpg: the board where left01.jpg has it (the same pose: the view adds nothing)"]
     assert (tmp_path / "c.yaml").is_file()
+
+
+@pytest.mark.parametrize("scheme", ["ray://", ""], ids=["client", "gcs"])
+def test_ray_at_a_port_that_is_no_ray_head_gives_up_in_one_line(scheme: str, installation: Path) -> None:
+    """--ray at a port that accepts connections and never answers (Ray's GCS would retry for ever): one line once
+    the connection timeout is over (2 s here, 60 s by default), nothing of Ray's retries on stderr, no output."""
+    import socket
+    import threading
+
+    pytest.importorskip("ray")
+    if scheme:
+        pytest.importorskip("grpc")  # ray[client]
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(8)
+        held: list[socket.socket] = []
+        threading.Thread(target=lambda: [held.append(server.accept()[0]) for _ in range(8)], daemon=True).start()
+        address = f"{scheme}127.0.0.1:{server.getsockname()[1]}"
+        env = os.environ | {RAY_CONNECT_TIMEOUT_ENV: "2"}
+        started = time.monotonic()
+        proc = subprocess.run([*TOPSIDE, "track", "--rig", str(installation / "rig.yaml"), "-o", "o.csv", "--ray",
+                               address], cwd=installation.parent, capture_output=True, text=True, timeout=120,
+                              env=env)
+        took = time.monotonic() - started
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.splitlines() == [f"topside: error: --ray: {address} answers, and no Ray cluster connected "
+                                        "within 2 s (expected a Ray cluster's head: ray://HOST:10001 for Ray's client, "
+                                        "HOST:6379 for its GCS)"]
+    assert took < 30  # Ray's client alone would wait 30 s, its GCS connection for ever
+    assert not (installation.parent / "o.csv").exists()
