@@ -8,6 +8,7 @@ import importlib.util
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -518,3 +519,56 @@ def test_ray_at_a_port_that_is_no_ray_head_gives_up_in_one_line(scheme: str, ins
                                         "HOST:6379 for its GCS)"]
     assert took < 30  # Ray's client alone would wait 30 s, its GCS connection for ever
     assert not (installation.parent / "o.csv").exists()
+
+
+CONES_LINE = re.compile(r"cones: A (GREEN|AMBER|RED) (\d+)±(\d+) mm \(Δx ([+-]\d+) Δy ([+-]\d+) Δz ([+-]\d+)\)")
+
+
+def test_live_prints_the_cones_in_a_log(installation: Path, tmp_path: Path) -> None:
+    """live with its output piped: the cones' line, timestamped, every progress interval (0.2 s here): NO DATA and
+    why before the first measurement, then the offsets in mm (the truth: Δz 400 mm throughout)."""
+    code, out, lines = piped(["live", *RIG, "--rrd", str(tmp_path / "l.rrd"), "--speed", "0.5"], installation, 0.2)
+    assert code == 0, lines
+    cones = [m[2] for _, line in lines if (m := PROGRESS_LINE.match(line)) and m[2].startswith("cones: ")]
+    assert cones and cones[0] == "cones: A NO DATA (no measurement yet)", lines
+    shown = [m for line in cones if (m := CONES_LINE.fullmatch(line))]
+    assert len(shown) >= 2, cones
+    for m in shown:
+        assert abs(int(m[6]) - 400) <= 10 and int(m[3]) < 50
+        assert abs(np.hypot(int(m[4]), int(m[5])) - int(m[2])) <= 1.5  # the distance from the target is Δx, Δy's
+    assert "wrote 24 rows" in out
+
+
+def test_a_live_web_replay_keeps_serving_after_its_files_end(installation: Path, tmp_path: Path) -> None:
+    """live --web replaying files: when they end, the recording and CSV are final, one line says the viewer keeps
+    serving, and it does until SIGTERM (or Ctrl-C), which ends the command with status 0 and the viewer."""
+    import socket
+    import urllib.request
+
+    def free_port() -> int:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+
+    web_port, grpc_port = free_port(), free_port()
+    proc = subprocess.Popen([*TOPSIDE, "live", *RIG, "--rrd", str(tmp_path / "l.rrd"), "--speed", "inf", "--web",
+                             "--web-port", str(web_port), "--grpc-port", str(grpc_port)], cwd=installation,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    try:
+        line = ""
+        while proc.poll() is None and not line.startswith("the replay has ended"):
+            line = proc.stderr.readline()
+        assert line.startswith("the replay has ended; the web viewer keeps serving at "
+                               f"http://127.0.0.1:{web_port}/") and line.endswith(" until Ctrl-C\n"), line
+        assert (tmp_path / "l-offsets.csv").read_text().count("\n") == 25  # final, under its name
+        time.sleep(1.0)
+        assert proc.poll() is None
+        assert b"<html" in urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=10).read()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert out.count("wrote 24 rows") == 1 and "stopped" not in err
+    with pytest.raises(OSError):
+        urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=5)

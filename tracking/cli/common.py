@@ -166,14 +166,19 @@ class ProgressLines:
     @staticmethod
     def line(task: _Task, now: float, elapsed_s: float, ended: bool = False) -> str:
         """One progress line at wall time now (s since the epoch), elapsed_s into the work."""
-        stamp = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(now)) + f".{int(now % 1 * 1000):03d}"
         unit = f" {task.unit}" if task.unit else ""
         if task.total:
             count = f"{task.done:.0f} of {task.total:.0f}{unit} ({100 * task.done / task.total:.0f} %)"
         else:
             count = f"{task.done:.0f}{unit}" if task.done or unit else ""
         took = f"done in {elapsed_s:.0f} s" if ended else f"{elapsed_s:.0f} s"
-        return f"{stamp} topside: {task.description}: " + ", ".join(p for p in (count, took) if p)
+        return f"{stamp(now)} topside: {task.description}: " + ", ".join(p for p in (count, took) if p)
+
+
+def stamp(now: float | None = None) -> str:
+    """Local date and time to the millisecond, as a log line starts: '2026-05-04 03:12:07.415'."""
+    now = time.time() if now is None else now
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(now)) + f".{int(now % 1 * 1000):03d}"
 
 
 def one_line(text: object) -> str:
