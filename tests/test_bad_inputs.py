@@ -257,6 +257,15 @@ CASES = [
     Case("track --ray no port", ["track", *RIG, "--ray", "nonsense"], ("--ray", "nonsense", "not a Ray address")),
     Case("track --ray a port nobody listens on", ["track", *RIG, "--ray", "127.0.0.1:1"],
          ("--ray", "127.0.0.1:1 does not answer", "expected a Ray cluster's head")),
+    # markers
+    Case("markers -o a file", ["markers", *RIG, "-o", "truth.csv"], ("truth.csv", "--out", "is a file")),
+    Case("markers --dpi 0", ["markers", *RIG, "-o", "sheets", "--format", "png", "--dpi", "0"], ("--dpi",)),
+    Case("markers --format gif", ["markers", *RIG, "-o", "sheets", "--format", "gif"], ("--format", "gif")),
+    Case("markers --dpi too fine for a 1 m marker", ["markers", *RIG, "-o", "sheets", "--format", "png", "--dpi",
+                                                     "1200"], ("--dpi", "Mpx", "--format pdf")),
+    Case("markers onto the rig", ["markers", "--rig", "marker-1-jacket-A-ahead.pdf", "-o", "."],
+         ("marker-1-jacket-A-ahead.pdf", "input"),
+         lambda f: shutil.copy(f / "rig.yaml", f / "marker-1-jacket-A-ahead.pdf")),
     # batch
     Case("batch with a name given twice", ["batch", "m.yaml"],
          ("m.yaml", "installations[1].name", "'A' is also installations[0]'s name"),
@@ -572,3 +581,56 @@ def test_a_live_web_replay_keeps_serving_after_its_files_end(installation: Path,
     assert out.count("wrote 24 rows") == 1 and "stopped" not in err
     with pytest.raises(OSError):
         urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=5)
+
+
+@pytest.mark.parametrize("inverted", [False, True], ids=["black-on-white", "white-on-black"])
+def test_marker_sheets_print_at_scale_and_read_back(inverted: bool, installation: Path, tmp_path: Path) -> None:
+    """markers --format png at 200 dpi of a rig with 0.1 m markers: a sheet per marker whose square OpenCV reads as
+    that marker, 0.1 m / 25.4 mm × 200 px wide, in a quiet zone, the DPI in the file; the rig untouched."""
+    import cv2
+    from PIL import Image
+
+    from tracking.cli.options import SheetFormat
+    from tracking.detection import MarkerDetector
+    from tracking.marker_sheets import FORMATS
+
+    assert tuple(f.value for f in SheetFormat) == FORMATS
+    folder = tmp_path / "work"
+    shutil.copytree(installation, folder)
+    edit_rig(lambda rig: rig.update(marker_size=0.1, inverted=inverted), to="small.yaml")(folder)
+    before = (folder / "small.yaml").read_bytes()
+    proc = subprocess.run([*TOPSIDE, "markers", "--rig", "small.yaml", "-o", "sheets", "--format", "png", "--dpi",
+                           "200"], cwd=folder, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert (folder / "small.yaml").read_bytes() == before
+    sheets = sorted((folder / "sheets").iterdir())
+    assert [p.name for p in sheets] == ["marker-1-jacket-A-ahead.png", "marker-2-topside-A-ahead.png",
+                                        "marker-3-jacket-A-port.png", "marker-4-topside-A-port.png"]
+    detector = MarkerDetector("DICT_6X6_250", inverted=inverted)
+    side_px = 0.1 / 0.0254 * 200
+    for path, marker_id in zip(sheets, (1, 2, 3, 4), strict=True):
+        assert Image.open(path).info["dpi"] == pytest.approx((200, 200), abs=0.01)
+        gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        assert gray.shape[1] == pytest.approx(1.5 * side_px, abs=1)  # the square and a quiet zone of 2 cells in 8
+        [found] = detector.detect(gray).markers
+        assert found.id == marker_id
+        sides = np.linalg.norm(np.roll(found.corners, -1, axis=0) - found.corners, axis=1)
+        assert np.allclose(sides, side_px, atol=2.0), sides  # at print scale, to 2 px of 787
+        assert found.corners[0][1] < found.corners[3][1]  # the marker's top at the page's top
+        paper = 0 if inverted else 255
+        assert np.all(gray[:int(0.2 * side_px)] == paper)  # the quiet zone above the square
+    assert "wrote 4 sheets to sheets" in proc.stdout
+
+
+def test_marker_sheets_as_pdf_pages_of_print_size(installation: Path, tmp_path: Path) -> None:
+    """markers (PDF): a page per marker exactly the square (1 m) and its quiet zone wide, in points."""
+    proc = subprocess.run([*TOPSIDE, "markers", *RIG, "-o", str(tmp_path)], cwd=installation, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    pages = sorted(tmp_path.glob("marker-*.pdf"))
+    assert len(pages) == 4
+    for page in pages:
+        box = re.search(rb"/MediaBox \[\s*0 0 ([0-9.]+) ([0-9.]+)\s*\]", page.read_bytes())
+        assert box is not None
+        assert float(box[1]) == pytest.approx(1.5 / 0.0254 * 72, abs=0.5)  # 1.5 m: 1 m and two 0.25 m zones
+        assert float(box[2]) == pytest.approx(1.66 / 0.0254 * 72, abs=0.5)  # and the 0.16 m label band

@@ -4,7 +4,7 @@ The command line is the one place that composes everything: the tracker (trackin
 (viewer/) and the simulator (tracking/sim/); nothing imports it (the contracts in pyproject.toml, checked by
 lint-imports). Its commands live by group:
 
-    fieldwork.py   calibrate, detect, check, sync, survey (and their tables)
+    fieldwork.py   calibrate, detect, markers, check, sync, survey (and their tables)
     run.py         track, batch, evaluate, demo (track and batch share one run loop)
     archive.py     export, verify
     live.py        live
@@ -63,8 +63,9 @@ def _options(version: Annotated[bool, typer.Option("--version", help="Print the 
     """Watch an offshore topside being set down on its jacket, from cameras."""
 
 
-for command in (fieldwork.calibrate, fieldwork.detect, run.track, run.batch, archive.export, archive.verify, view.view,
-                live.live, fieldwork.sync, fieldwork.survey, sim.simulate, run.evaluate, fieldwork.check, run.demo):
+for command in (fieldwork.calibrate, fieldwork.detect, fieldwork.markers, run.track, run.batch, archive.export,
+                archive.verify, view.view, live.live, fieldwork.sync, fieldwork.survey, sim.simulate, run.evaluate,
+                fieldwork.check, run.demo):
     app.command()(command)  # in this order in `topside --help`
 
 

@@ -1,5 +1,6 @@
 """The field engineer's commands and their tables: `calibrate` a camera, `detect` markers in an image or a video,
-`check` a rig before the lift, `sync` the cameras' clocks and `survey` the markers from footage."""
+print the rig's `markers`, `check` a rig before the lift, `sync` the cameras' clocks and `survey` the markers from
+footage."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from rich.table import Table
 
 from tracking.calibration import SUBPIX_WINDOW
 from tracking.cli.common import console, err_console, progress_bar, rig_inputs, warn_lines, warn_rig
-from tracking.cli.options import RefineOption, finite
+from tracking.cli.options import RefineOption, SheetFormat, finite
 from tracking.detection import DEFAULT_REFINEMENT
 from tracking.errors import InputError
 from tracking.outputs import atomic_path, check_outputs
@@ -200,6 +201,44 @@ def _print_detections(frame: Frame, markers: list[dict], as_json: bool) -> None:
             p = e["pose"]
             console.print(f"         t={p['tvec']} m  r={p['rvec']}  reproj {p['reprojection_error']:.3f}px "
                           f"(other {p['alternative_error']:.3f}px, {p['choice']})")
+
+
+def markers(
+    rig: Annotated[Path, typer.Option(help="Rig file whose markers to print.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Folder for the sheets (made if missing).")],
+    fmt: Annotated[SheetFormat, typer.Option("--format", help="pdf (every cell a rectangle: sharp at any size) or "
+                                                              "png (at --dpi).")] = SheetFormat.PDF,
+    dpi: Annotated[float, typer.Option(help="Resolution of PNG sheets, dots per inch.",
+                                       callback=finite(0.0, high=2400.0))] = 150.0,
+) -> None:
+    """Write a printable sheet per marker of the rig, at print scale: the black square of marker_size as cv2.aruco
+    draws it, a white quiet zone around it, and a label with the marker's id, body, cone and face. Print at 100 %
+    (no fitting to the paper): the square then measures marker_size."""
+    import tracking.marker_sheets as ms
+    from tracking.rig import load_rig
+
+    the_rig = load_rig(rig)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "is a file (expected a folder for the sheets)", "--out")
+    pages = [ms.sheet(the_rig, m) for m in the_rig.markers]
+    paths = [out / ms.sheet_name(page.marker, fmt.value) for page in pages]
+    check_outputs({f"--out ({p.name})": p for p in paths}, [the_rig.path])
+    if fmt == SheetFormat.PNG and pages and (biggest := max(ms.png_pixels(p, dpi) for p in pages)) > ms.MAX_PNG_PIXELS:
+        raise InputError("--dpi", f"{dpi:g} dpi makes a page of {biggest / 1e6:.0f} Mpx (expected at most "
+                                  f"{ms.MAX_PNG_PIXELS / 1e6:.0f}: a lower --dpi, or --format pdf)")
+    warn_rig(the_rig)
+    out.mkdir(parents=True, exist_ok=True)
+    table = Table(title=f"marker sheets of {rig} ({the_rig.dictionary}, black square {the_rig.marker_size * 1000:.0f} "
+                        "mm)")
+    for col in ("marker", "body", "cone", "face", "page [mm]", "file"):
+        table.add_column(col, justify="right" if col in ("marker", "page [mm]") else "left")
+    for page, path in zip(pages, paths, strict=True):
+        ms.write_sheet(page, path, fmt.value, dpi)
+        width, height = page.page_m
+        table.add_row(str(page.marker.id), page.marker.body, page.marker.cone, page.marker.face,
+                      f"{width * 1000:.0f} × {height * 1000:.0f}", str(path))
+    console.print(table)
+    console.print(f"wrote {len(pages)} sheets to {out}: print each at 100 % (actual size)", markup=False)
 
 
 def check(
