@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import json
 import os
 import re
 import shutil
@@ -207,6 +208,9 @@ CASES = [
     Case("detect --dictionary binary", ["detect", "cam-ahead.mp4", "--dictionary", "dict.yaml"], ("dict.yaml",),
          write("dict.yaml", BINARY)),
     Case("detect an image that is missing", ["detect", "nothing.png"], ("nothing.png",)),
+    Case("detect a stream nobody serves", ["detect", "rtsp://127.0.0.1:1/stream1"],
+         ("rtsp://127.0.0.1:1/stream1: cannot be opened as a video",)),  # the URL as given, not rtsp:/127...
+    Case("detect a device that is not there", ["detect", "63"], ("device 63", "cannot be opened")),
     # calibrate
     Case("calibrate -o a folder", ["calibrate", "a.png", "--board", "chessboard:9x6:0.025", "-o", "calibration"],
          ("calibration", "directory"), write("a.png", PNG)),
@@ -634,3 +638,40 @@ def test_marker_sheets_as_pdf_pages_of_print_size(installation: Path, tmp_path: 
         assert box is not None
         assert float(box[1]) == pytest.approx(1.5 / 0.0254 * 72, abs=0.5)  # 1.5 m: 1 m and two 0.25 m zones
         assert float(box[2]) == pytest.approx(1.66 / 0.0254 * 72, abs=0.5)  # and the 0.16 m label band
+
+
+def test_detect_reads_a_stream_url(installation: Path, tmp_path: Path) -> None:
+    """detect http://…/cam.ts --frames 3: a camera tried before the rig exists, through a stream URL (an MPEG-TS copy
+    of cam-ahead's video served over HTTP here): its markers every frame, on the wall clock, then it stops."""
+    import http.server
+    import threading
+
+    import av
+
+    with av.open(str(installation / "cam-ahead.mp4")) as src, av.open(str(tmp_path / "cam.ts"), "w",
+                                                                       format="mpegts") as dst:
+        out = dst.add_stream_from_template(src.streams.video[0])
+        for packet in src.demux(src.streams.video[0]):
+            if packet.dts is not None:
+                packet.stream = out
+                dst.mux(packet)
+
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def __init__(self, *args: object, **kwargs: object) -> None:
+            super().__init__(*args, directory=str(tmp_path), **kwargs)  # type: ignore[arg-type]
+
+        def log_message(self, *args: object) -> None:
+            pass
+
+    with http.server.ThreadingHTTPServer(("127.0.0.1", 0), Quiet) as server:
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        url = f"http://127.0.0.1:{server.server_address[1]}/cam.ts"
+        started = time.time()
+        proc = subprocess.run([*TOPSIDE, "detect", url, "--frames", "3", "--json"], capture_output=True, text=True,
+                              timeout=120)
+        server.shutdown()
+    assert proc.returncode == 0, proc.stderr
+    frames = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert [f["frame"] for f in frames] == [0, 1, 2]
+    assert all(sorted(m["id"] for m in f["markers"]) == [1, 2] for f in frames)
+    assert all(started <= f["time"] <= time.time() + 1 for f in frames)  # stamped on the wall clock as they came

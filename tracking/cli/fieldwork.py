@@ -22,6 +22,8 @@ from tracking.errors import InputError
 from tracking.outputs import atomic_path, check_outputs
 
 if TYPE_CHECKING:
+    from collections.abc import Iterator
+
     from tracking.calibration import CalibrationResult
     from tracking.camera import CameraModel
     from tracking.check import CheckReport
@@ -98,7 +100,8 @@ def _print_calibration(result: CalibrationResult, n_images: int, fix_aspect: boo
 
 
 def detect(
-    source: Annotated[Path, typer.Argument(help="An image or a video.")],
+    source: Annotated[str, typer.Argument(help="An image, a video, a camera's device index (0) or a stream URL "
+                                               "(rtsp://, http://).")],
     dictionary: Annotated[str | None, typer.Option(help="DICT_6X6_250 (default) or a dictionary YAML.")] = None,
     rig: Annotated[Path | None, typer.Option(help="Rig file: its dictionary, marker size and ids.")] = None,
     camera: Annotated[Path | None, typer.Option(help="Camera file: also estimate every marker's pose.")] = None,
@@ -108,11 +111,18 @@ def detect(
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per frame.")] = False,
     inverted: Annotated[bool, typer.Option("--inverted", help="Markers printed white on black (a rig says so "
                                                               "itself: inverted: true).")] = False,
+    max_frames: Annotated[int | None, typer.Option("--frames", min=1, help="Stop after this many frames (default: "
+                                                                           "all of a file; a camera or stream "
+                                                                           "until Ctrl-C).")] = None,
 ) -> None:
-    """Print the markers found in every frame: ids, corners (TL TR BR BL) and, given a camera, poses."""
+    """Print the markers found in every frame: ids, corners (TL TR BR BL) and, given a camera, poses.
+
+    A camera can be tried before the rig exists: `topside detect 0 --frames 30` (a device) or `topside detect
+    rtsp://10.0.0.5/stream1` shows the ids it sees and, with --camera, how far they are."""
+    import itertools
+
     from tracking.camera import load_camera
     from tracking.detection import MarkerDetector
-    from tracking.images import frames
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig) if rig else None
@@ -126,7 +136,7 @@ def detect(
     size = marker_size or (the_rig.marker_size if the_rig else 1.0)
     unknown: Counter[int] = Counter()  # ids not in the rig: detections
     n_frames = 0
-    for frame in frames(source):
+    for frame in itertools.islice(_source_frames(source), max_frames):
         n_frames += 1
         det = detector.detect(frame.gray)
         cam = _sized_camera(cam, frame, camera, source)
@@ -136,7 +146,21 @@ def detect(
         err_console.print(f"{n_frames} frames; markers not in the rig ignored: {summary}")
 
 
-def _sized_camera(cam: CameraModel | None, frame: Frame, camera: Path | None, source: Path) -> CameraModel | None:
+def _source_frames(source: str) -> Iterator[Frame]:
+    """The frames of what `detect` was given: a device index, a stream URL (kept as written: a Path would make
+    rtsp://host rtsp:/host), or an image or video file; live frames on the wall clock."""
+    from tracking.images import frames
+    from tracking.sources import SourceKind, device_frames, source_kind, stream_frames
+
+    kind = source_kind(source)
+    if kind == SourceKind.DEVICE:
+        return device_frames(int(source), 0.0, encode=False)
+    if kind == SourceKind.STREAM:
+        return stream_frames(source, 0.0)
+    return frames(Path(source))
+
+
+def _sized_camera(cam: CameraModel | None, frame: Frame, camera: Path | None, source: str) -> CameraModel | None:
     """The camera model for this frame: a calibration without a size takes the first frame's (with a warning); one
     for another size is bad input."""
     if cam is None:
@@ -152,7 +176,7 @@ def _sized_camera(cam: CameraModel | None, frame: Frame, camera: Path | None, so
 
 
 def _marker_entries(markers: list[MarkerDetection], cam: CameraModel | None, size: float, rig: Rig | None,
-                    rig_path: Path | None, source: Path, unknown: Counter[int]) -> list[dict]:
+                    rig_path: Path | None, source: str, unknown: Counter[int]) -> list[dict]:
     """A frame's markers as printed: id, corners (4, 2) and, with a camera, the pose. With a rig, an id it does not
     list is counted in unknown and left out (in a single image, it is bad input)."""
     from tracking.images import is_image
