@@ -675,3 +675,21 @@ def test_detect_reads_a_stream_url(installation: Path, tmp_path: Path) -> None:
     assert [f["frame"] for f in frames] == [0, 1, 2]
     assert all(sorted(m["id"] for m in f["markers"]) == [1, 2] for f in frames)
     assert all(started <= f["time"] <= time.time() + 1 for f in frames)  # stamped on the wall clock as they came
+
+
+def test_sync_keeps_the_rigs_comments(installation: Path, tmp_path: Path) -> None:
+    """sync writes the rig it read with its comments and layout: only the measured clock changes."""
+    folder = _copy(installation, tmp_path)
+    text = "# surveyed 2026-05-01, report S-114\n" + (folder / "rig.yaml").read_text().replace(
+        "marker_size: 1.0", "marker_size: 1.0  # the black square")
+    (folder / "rig.yaml").write_text(text)
+    proc = subprocess.run([*TOPSIDE, "sync", *RIG, "-o", "synced.yaml"], cwd=folder, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode in (0, 1), proc.stderr
+    synced = (folder / "synced.yaml").read_text()
+    import difflib
+
+    changed = [line for line in difflib.ndiff(text.splitlines(), synced.splitlines()) if line[:2] in ("- ", "+ ")]
+    assert changed and all(line[2:].strip().startswith("time_offset") for line in changed), changed
+    assert synced.startswith("# surveyed 2026-05-01, report S-114\n")
+    assert "marker_size: 1.0  # the black square" in synced

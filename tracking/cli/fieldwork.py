@@ -449,7 +449,7 @@ def sync(
     console.print(clock_table(clocks))
     for line in clock_lines(clocks):
         console.print(line, markup=False)
-    write_rig(synced_rig(the_rig, clocks), out)
+    write_rig(synced_rig(the_rig, clocks), out, the_rig)
     console.print(f"wrote {out} · {seconds / 60:.1f} camera-minutes: measured in {t1 - t0:.0f} s, fitted in "
                   f"{time.perf_counter() - t1:.1f} s", markup=False)
     if not all(c.known for c in clocks):
@@ -515,7 +515,7 @@ def survey(
                   "cannot tell where that marker sits)", markup=False)
     for line in survey_lines(the_rig, fit):
         console.print(line, markup=False)
-    write_rig(surveyed_rig(the_rig, fit), out)
+    write_rig(surveyed_rig(the_rig, fit), out, the_rig)
     console.print(f"wrote {out} · {seconds / 60:.1f} camera-minutes: measured in {t1 - t0:.0f} s, fitted in "
                   f"{time.perf_counter() - t1:.1f} s ({fit.iterations} iterations)", markup=False)
     if any(s.flagged for s in fit.markers):
