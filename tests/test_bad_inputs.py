@@ -448,7 +448,7 @@ def test_piped_fieldwork_prints_progress_while_reading_footage(command: str, ins
                                                                tmp_path: Path) -> None:
     """check and sync with their output piped: progress lines counting the frames read, the last once done."""
     args = {"check": ["check", *RIG], "sync": ["sync", *RIG, "-o", "synced.yaml"]}[command]
-    code, _, lines = piped(args, installation if command == "check" else _copy(installation, tmp_path), 0.2)
+    code, _, lines = piped(args, installation if command == "check" else _copy(installation, tmp_path), 0.05)
     assert code in (0, 1), lines
     progress = [m[2] for _, line in lines if (m := PROGRESS_LINE.match(line))]
     assert progress and re.fullmatch(r".*: 24 frames, done in \d+ s", progress[-1]), lines

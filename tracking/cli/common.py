@@ -105,10 +105,10 @@ class _Task:
 
 class ProgressLines:
     """Progress as plain lines on stderr for a log: one per task every interval s from a thread (whether or not the
-    work advanced: a line that stops coming means the command stopped), and one when the work has ended well. Each
-    line: local date and time to the millisecond, then the task, its count and the time it has taken, e.g.
-    '2026-05-04 03:12:07.415 topside: tracking 4 cameras: 1200 of 4800 frames (25 %), 31 s'. Nothing is printed
-    before the first interval, so bad input found at once is still the one line on stderr."""
+    work advanced: a line that stops coming means the command stopped), and, after those, one when the work has
+    ended well. Each line: local date and time to the millisecond, then the task, its count and the time it has
+    taken, e.g. '2026-05-04 03:12:07.415 topside: tracking 4 cameras: 1200 of 4800 frames (25 %), 31 s'. Work done
+    within one interval prints nothing, so bad input is still the one line on stderr."""
 
     def __init__(self, interval_s: float = PROGRESS_INTERVAL_S) -> None:
         self.interval_s = interval_s
@@ -116,6 +116,7 @@ class ProgressLines:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._started = time.monotonic()
+        self._printed = False  # a line was printed: the work's end gets one too
         self._thread = threading.Thread(target=self._tick, name="progress-lines", daemon=True)
 
     def __enter__(self) -> ProgressLines:
@@ -127,7 +128,7 @@ class ProgressLines:
                  tb: TracebackType | None) -> None:
         self._stop.set()
         self._thread.join()
-        if kind is None:
+        if kind is None and self._printed:
             self._print_all(ended=True)
 
     def add_task(self, description: str, total: float | None = None, unit: str = "", **fields: Any) -> int:
@@ -161,6 +162,7 @@ class ProgressLines:
             self._print(task, ended)
 
     def _print(self, task: _Task, ended: bool = False) -> None:
+        self._printed = True
         err_console.print(self.line(task, time.time(), time.monotonic() - self._started, ended), markup=False)
 
     @staticmethod

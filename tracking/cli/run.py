@@ -173,7 +173,7 @@ def track(
     (--ray) and fused here in capture-time order: the output is the same whatever runs the chunks."""
     from tracking.estimator import ESTIMATORS, FilterReport
     from tracking.evaluate import read_truth
-    from tracking.parallel import plan_rig, runner
+    from tracking.parallel import runner
     from tracking.pipeline import TrackStats
     from tracking.rig import load_rig
 
@@ -187,17 +187,12 @@ def track(
     loop = RunLoop(the_rig, runner(workers, ray), refine, [], TrackStats(), roi=roi, warn=True)
     try:
         with outputs, progress_bar() as progress:
-            task = progress.add_task(f"finding the keyframes of {len(the_rig.cameras)} videos", total=None)
-            loop.plans = plan_rig(the_rig, chunk_frames=chunk_frames)
-            warn_rig(the_rig)  # once every input is read: bad input stays the one line on stderr
-            progress.update(task, description=f"tracking {len(the_rig.cameras)} cameras",
-                            total=sum(p.frames for p in loop.plans) or None, unit="frames")
+            _plan(loop, progress, chunk_frames)
             csv = outputs.claim(out)
             if rrd is not None:
                 loop.sinks.append(recorder(the_rig, outputs.claim(rrd), truth_df, options, show_rejected=rejected))
             if archive is not None:
                 loop.sinks.append(archive_sink(the_rig, outputs.claim(mcap), options, truth_df, archive, csv))
-            loop.advance = lambda: progress.advance(task)
             loop.write(csv, ESTIMATORS[mode], report)
     except KeyboardInterrupt:
         kept = ", ".join(map(str, outputs.kept)) or "nothing"
@@ -209,6 +204,20 @@ def track(
     _print_track_outputs(loop.rows, out, rrd, mcap)
     if mode in (Mode.FUSED, Mode.SMOOTHED):
         _rig_findings(rig, report)
+
+
+def _plan(loop: RunLoop, progress: Reporter, chunk_frames: int) -> None:
+    """The rig's videos cut into chunks (their keyframes found) under a progress task, then the rig's warnings (once
+    every input is read: bad input stays the one line on stderr); the task then counts the frames tracked."""
+    from tracking.parallel import plan_rig
+
+    cameras = len(loop.rig.cameras)
+    task = progress.add_task(f"finding the keyframes of {cameras} videos", total=None)
+    loop.plans = plan_rig(loop.rig, chunk_frames=chunk_frames)
+    warn_rig(loop.rig)
+    progress.update(task, description=f"tracking {cameras} cameras", total=sum(p.frames for p in loop.plans) or None,
+                    unit="frames")
+    loop.advance = lambda: progress.advance(task)
 
 
 def _print_track_summary(rig: Rig, rig_path: Path, mode: Mode, stats: TrackStats) -> None:
