@@ -65,6 +65,8 @@ def test_batch_goes_on_past_a_broken_installation(clip: Path, installation: Path
     ("- {rig: a.yaml, out: a, colour: red}\n", "installations[0].colour", "not a field"),
     ("- {rig: a.yaml, out: same}\n- {rig: b.yaml, out: same}\n", "installations[1].out", "also installations[0]"),
     ("installations: []\n", "installations", "at least 1"),
+    ("- {rig: a.yaml, out: a, name: B}\n- {rig: b.yaml, out: b, name: B}\n", "installations[1].name",
+     "'B' is also installations[0]'s name"),
 ])
 def test_manifest_errors_name_the_file_and_field(tmp_path: Path, text: str, field: str, message: str) -> None:
     path = tmp_path / "manifest.yaml"
@@ -73,6 +75,13 @@ def test_manifest_errors_name_the_file_and_field(tmp_path: Path, text: str, fiel
         load_manifest(path)
     assert err.value.source == str(path) and err.value.field == field and message in err.value.message
     assert "\n" not in str(err.value)
+
+
+def test_installations_without_names_are_told_apart(tmp_path: Path) -> None:
+    """Two rigs in one folder: labelled by their out folders as the manifest writes them; one alone by its rig's."""
+    (tmp_path / "manifest.yaml").write_text("- {rig: a.yaml, out: results/a}\n- {rig: b.yaml, out: results/b}\n"
+                                            "- {rig: site/rig.yaml, out: results/site}\n")
+    assert [i.label for i in load_manifest(tmp_path / "manifest.yaml")] == ["results/a", "results/b", "site"]
 
 
 def test_manifest_paths_are_relative_to_it(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ and the others go on.
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -93,7 +94,24 @@ def load_manifest(path: str | Path) -> list[Installation]:
         folders[key] = k
         if inst.out.exists() and not inst.out.is_dir():
             raise InputError(path, f"{inst.out} is a file (expected a folder)", f"installations[{k}].out")
-    return out
+    return _distinct_names(path, out, [i.out for i in manifest.installations])
+
+
+def _distinct_names(path: Path, installations: list[Installation], written: list[Path]) -> list[Installation]:
+    """Every installation named apart: the summary table and the failure lines name installations by their label. A
+    name given twice is a one-line InputError naming the manifest, the field and the name; an installation without a
+    name whose rig's folder names another too is labelled by its out folder as the manifest writes it (written)."""
+    names: dict[str, int] = {}
+    for k, inst in enumerate(installations):
+        if inst.name in names:
+            raise InputError(path, f"{inst.name!r} is also installations[{names[inst.name]}]'s name (expected a name "
+                                   "of its own: the summary tells installations apart by it)",
+                             f"installations[{k}].name")
+        if inst.name:
+            names[inst.name] = k
+    labels = Counter(inst.label for inst in installations)
+    return [inst if inst.name or labels[inst.label] == 1 else inst.model_copy(update={"name": str(out)})
+            for inst, out in zip(installations, written, strict=True)]
 
 
 @dataclass

@@ -20,6 +20,12 @@ SUBPIX_WINDOW = 5  # half-size, px, as OpenCV's own calibration test; its calibr
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.1)
 COVERAGE_GRID = 5  # the image is split into COVERAGE_GRID² cells to judge how much the board covered
 COVERAGE_WARN = 0.6  # warn below this share of cells holding a corner
+# Two views are one pose when the board's shared corners moved on average by less than this share of the board's
+# extent in the image (its bounding box's diagonal): the same photo given twice moves nothing, one re-taken from a
+# tripod a fraction of a pixel; a board tilted by 20° (what tells calibrateCamera the focal length) moves them by 2 %
+# of its extent, moved across the picture by tens of percent.
+SAME_POSE_SHARE = 0.005
+MIN_SHARED_CORNERS = 4  # fewer shared corners (ChArUco views of different parts of the board): distinct views
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 
 
@@ -123,6 +129,7 @@ class CalibrationResult:
     flags: int = 0  # cv2.CALIB_* flags used
     rvecs: list[np.ndarray] = field(default_factory=list)
     tvecs: list[np.ndarray] = field(default_factory=list)
+    repeated: dict[str, str] = field(default_factory=dict)  # photo -> the earlier photo whose board pose it repeats
 
 
 def board_coverage(views: Sequence[BoardView], size: tuple[int, int]) -> float:
@@ -159,6 +166,12 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
         raise InputError(paths[0] if paths else "IMAGES",
                          f"board found in {len(views)} of {len(paths)} photos; need at least {MIN_VIEWS} "
                          f"usable views (board {board.kind} {board.cols}x{board.rows})")
+    poses = distinct_poses(views)
+    if len(poses) < MIN_VIEWS:
+        raise InputError(views[0].path, f"the board is in {len(views)} photos but at only {len(poses)} distinct "
+                                        f"pose{'s' if len(poses) > 1 else ''} ({_repeats_text(views, poses)}); need "
+                                        f"at least {MIN_VIEWS} distinct views (move and tilt the board between "
+                                        "photos)")
     assert size is not None
     flags = 0
     K0 = None
@@ -176,4 +189,37 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
         camera=camera, rms=float(rms),
         per_view_rms={v.path.name: float(e) for v, e in zip(views, per_view.reshape(-1), strict=True)},
         std_intrinsics=std_named, missed=missed, coverage=board_coverage(views, size), flags=flags,
-        rvecs=list(rvecs), tvecs=list(tvecs))
+        rvecs=list(rvecs), tvecs=list(tvecs),
+        repeated={views[k].path.name: views[group[0]].path.name for group in poses for k in group[1:]})
+
+
+def view_distance(a: BoardView, b: BoardView) -> float:
+    """How far b's board lies from a's in the image: the mean distance of their shared corners (matched by board
+    point) as a share of a's board extent (its bounding box's diagonal); inf when they share too few corners."""
+    index = {tuple(np.round(p, 6)): i for i, p in enumerate(a.object_points)}
+    pairs = [(index[key], j) for j, p in enumerate(b.object_points) if (key := tuple(np.round(p, 6))) in index]
+    if len(pairs) < MIN_SHARED_CORNERS:
+        return float("inf")
+    ia, ib = np.array(pairs).T
+    extent = float(np.linalg.norm(np.ptp(a.image_points, axis=0)))
+    return float(np.mean(np.linalg.norm(a.image_points[ia] - b.image_points[ib], axis=1))) / max(extent, 1e-9)
+
+
+def distinct_poses(views: Sequence[BoardView]) -> list[list[int]]:
+    """The views grouped by board pose, in order: each group a first view and the views within SAME_POSE_SHARE of it
+    (photos re-taken, or the same photo given twice)."""
+    groups: list[list[int]] = []
+    for k, view in enumerate(views):
+        same = next((g for g in groups if view_distance(views[g[0]], view) < SAME_POSE_SHARE), None)
+        if same is None:
+            groups.append([k])
+        else:
+            same.append(k)
+    return groups
+
+
+def _repeats_text(views: Sequence[BoardView], poses: list[list[int]]) -> str:
+    """'b.png, c.png repeat a.png's view; ...' for the groups of more than one view."""
+    parts = [f"{', '.join(views[k].path.name for k in g[1:])} repeat{'s' if len(g) == 2 else ''} "
+             f"{views[g[0]].path.name}'s view" for g in poses if len(g) > 1]
+    return "; ".join(parts)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Literal
@@ -251,7 +251,8 @@ def first_seconds(frames: Iterable[Frame], seconds: float) -> Iterator[Frame]:
         yield frame
 
 
-def run_camera(rig: Rig, name: str, seconds: float, refinement: Refinement = DEFAULT_REFINEMENT) -> CameraRun:
+def run_camera(rig: Rig, name: str, seconds: float, refinement: Refinement = DEFAULT_REFINEMENT,
+               on_frame: Callable[[], None] | None = None) -> CameraRun:
     """Detect and estimate poses in the first `seconds` of one camera's source (a file is read flat out)."""
     entry = next(c for c in rig.cameras if c.name == name)
     tracker = CameraTracker.from_rig(rig, entry, refinement)
@@ -265,6 +266,8 @@ def run_camera(rig: Rig, name: str, seconds: float, refinement: Refinement = DEF
             first = replace(frame, packet=None) if first is None else first  # its pixels, for the recording
             health = frame.video if frame.video is not None else health
             results.append(replace(result, frame=replace(frame, gray=None, bgr=None, packet=None)))
+            if on_frame is not None:
+                on_frame()
     finally:
         close = getattr(frames, "close", None)
         if close is not None:
@@ -272,12 +275,13 @@ def run_camera(rig: Rig, name: str, seconds: float, refinement: Refinement = DEF
     return CameraRun(tracker, results, health, first, warnings)
 
 
-def run_cameras(rig: Rig, seconds: float, refinement: Refinement = DEFAULT_REFINEMENT) -> dict[str, CameraRun]:
+def run_cameras(rig: Rig, seconds: float, refinement: Refinement = DEFAULT_REFINEMENT,
+                on_frame: Callable[[], None] | None = None) -> dict[str, CameraRun]:
     """Every camera's first `seconds`, read side by side (live sources then overlap in time)."""
     if not rig.cameras:
         raise InputError(rig.path, "no cameras to check (expected at least one)", "cameras")
     with ThreadPoolExecutor(max_workers=len(rig.cameras)) as pool:
-        futures = {c.name: pool.submit(run_camera, rig, c.name, seconds, refinement) for c in rig.cameras}
+        futures = {c.name: pool.submit(run_camera, rig, c.name, seconds, refinement, on_frame) for c in rig.cameras}
         return {name: future.result() for name, future in futures.items()}
 
 
@@ -409,9 +413,11 @@ def depth_reason(e: ConeEstimate, cameras: tuple[str, ...], rig: Rig, cone: str)
             "measure that axis")
 
 
-def check_rig(rig: Rig, seconds: float = DEFAULT_SECONDS, refinement: Refinement = DEFAULT_REFINEMENT) -> CheckReport:
-    """Check a rig against the first `seconds` of each of its cameras (see the module)."""
-    return check_runs(rig, run_cameras(rig, seconds, refinement), seconds)
+def check_rig(rig: Rig, seconds: float = DEFAULT_SECONDS, refinement: Refinement = DEFAULT_REFINEMENT,
+              on_frame: Callable[[], None] | None = None) -> CheckReport:
+    """Check a rig against the first `seconds` of each of its cameras (see the module); on_frame is called after each
+    frame is processed (from the cameras' threads)."""
+    return check_runs(rig, run_cameras(rig, seconds, refinement, on_frame), seconds)
 
 
 def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckReport:

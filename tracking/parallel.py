@@ -17,10 +17,15 @@ import math
 import os
 import re
 import resource
+import socket
+import sys
+import tempfile
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -39,6 +44,13 @@ CHUNK_FRAMES = 150  # a chunk starts at the first keyframe this many frames or m
 RAY_INSTALL = "pip install 'topside[cluster]'"  # what `--ray` says when Ray is not installed
 RAY_CLIENT_INSTALL = "pip install 'ray[client]'"  # what a ray:// address says when Ray's client is not installed
 RAY_ADDRESS = re.compile(r"(?P<client>ray://)?(?P<host>[A-Za-z0-9._-]+|\[[0-9A-Fa-f:.]+\])(:(?P<port>[0-9]{1,5}))?")
+RAY_CLIENT_PORT = 10001  # Ray's client server: ray://HOST without a port
+RAY_PROBE_TIMEOUT_S = 5.0  # a cluster's head accepts a TCP connection within this, or the address is refused at once
+# Connecting to a port that answers but is no Ray head: Ray's client gives up after 30 s by itself, its connection to
+# a cluster's GCS (HOST:PORT) retries for ever; topside gives up after this (the environment variable overrides it).
+RAY_CONNECT_TIMEOUT_S = 60.0
+RAY_CONNECT_TIMEOUT_ENV = "TOPSIDE_RAY_CONNECT_TIMEOUT_S"
+RAY_EXPECTED = "expected a Ray cluster's head: ray://HOST:10001 for Ray's client, HOST:6379 for its GCS"
 
 
 @dataclass(frozen=True)
@@ -319,9 +331,11 @@ class RayRunner:
         self.ray = ray
         self.started = False
         if not ray.is_initialized():
-            local = address in ("", "local")
-            ray.init(address=None if local else address, num_cpus=workers if local else None,
-                     include_dashboard=False, log_to_driver=False, configure_logging=False)
+            if address in ("", "local"):
+                ray.init(address=None, num_cpus=workers, include_dashboard=False, log_to_driver=False,
+                         configure_logging=False)
+            else:
+                connect_ray(ray, address)
             self.started = True
         self.workers = int(ray.cluster_resources().get("CPU", 1))
         self.remote = ray.remote(num_cpus=1, max_retries=2)(run_chunk)
@@ -355,6 +369,81 @@ def check_ray_address(address: str) -> None:
     if match["client"] and importlib.util.find_spec("grpc") is None:  # Ray's own test of its client's dependencies
         raise InputError("--ray", f"{address} needs Ray's client, which is not installed (install it with: "
                                   f"{RAY_CLIENT_INSTALL})")
+
+
+def ray_endpoint(address: str) -> tuple[str, int] | None:
+    """The host and port a cluster's address names (ray://HOST[:PORT] or HOST:PORT); None for a Ray found by Ray
+    ('auto') or started here."""
+    match = RAY_ADDRESS.fullmatch(address)
+    if address in ("", "local", "auto") or match is None:
+        return None
+    return match["host"].strip("[]"), int(match["port"] or RAY_CLIENT_PORT)
+
+
+def probe_ray(address: str, timeout: float = RAY_PROBE_TIMEOUT_S) -> None:
+    """A one-line InputError when the cluster's head does not accept a TCP connection within timeout."""
+    endpoint = ray_endpoint(address)
+    if endpoint is None:
+        return
+    try:
+        socket.create_connection(endpoint, timeout=timeout).close()
+    except OSError as exc:
+        why = f"no answer within {timeout:.0f} s" if isinstance(exc, TimeoutError) else \
+            exc.strerror or type(exc).__name__
+        raise InputError("--ray", f"{address} does not answer ({why}; {RAY_EXPECTED})") from None
+
+
+def connect_ray(ray: Any, address: str) -> None:
+    """ray.init to the cluster at address, or a one-line InputError within a bounded time: the head is probed first
+    (an unreachable one is refused within RAY_PROBE_TIMEOUT_S), then Ray connects in a thread of its own, given
+    RAY_CONNECT_TIMEOUT_S (a port that answers and is no Ray head: Ray would retry for ever). What Ray writes to
+    stderr meanwhile (its core's retries, every 5 s) goes to a file dropped after, so a failure is one line."""
+    probe_ray(address)
+    outcome: list[BaseException | None] = []
+
+    def init() -> None:
+        try:
+            ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
+            outcome.append(None)
+        except Exception as exc:  # Ray's ConnectionError, RuntimeError, ...: named in the line
+            outcome.append(exc)
+
+    timeout = _env_seconds(RAY_CONNECT_TIMEOUT_ENV, RAY_CONNECT_TIMEOUT_S)
+    with _stderr_to_file():
+        thread = threading.Thread(target=init, name="ray-connect", daemon=True)  # not its SIGTERM handler either
+        thread.start()
+        thread.join(timeout)
+    if not outcome:
+        raise InputError("--ray", f"{address} answers, and no Ray cluster connected within {timeout:g} s "
+                                  f"({RAY_EXPECTED})")
+    if outcome[0] is not None:
+        raise InputError("--ray", f"{address}: could not connect: {outcome[0]} ({RAY_EXPECTED})")
+
+
+def _env_seconds(name: str, default: float) -> float:
+    """A positive number of seconds from the environment, else default."""
+    try:
+        value = float(os.environ.get(name, ""))
+    except ValueError:
+        return default
+    return value if math.isfinite(value) and value > 0 else default
+
+
+@contextmanager
+def _stderr_to_file() -> Iterator[None]:
+    """File descriptor 2 (Python's and Ray's C++ core's stderr) into a temporary file for the block."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with tempfile.TemporaryFile() as sink:
+            os.dup2(sink.fileno(), 2)
+            try:
+                yield
+            finally:
+                sys.stderr.flush()
+                os.dup2(saved, 2)
+    finally:
+        os.close(saved)
 
 
 def import_ray() -> Any:

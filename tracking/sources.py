@@ -137,10 +137,16 @@ class H264Encoder:
         return b"".join(bytes(p) for p in packets), any(p.is_keyframe for p in packets)
 
 
-def device_frames(index: int, time_offset: float, clock: Callable[[], float] = time.time) -> Iterator[Frame]:
-    """Frames of a local camera, stamped on the wall clock as they are grabbed, with H.264 packets and the health of
-    their times (a wall clock stepped back drops the frame; a stall over VideoHealth.jump_s counts as a jump)."""
-    capture = cv2.VideoCapture(index)
+def device_frames(index: int, time_offset: float, clock: Callable[[], float] = time.time, encode: bool = True
+                  ) -> Iterator[Frame]:
+    """Frames of a local camera, stamped on the wall clock as they are grabbed, with H.264 packets (unless not
+    encode) and the health of their times (a wall clock stepped back drops the frame; a stall over
+    VideoHealth.jump_s counts as a jump)."""
+    quiet = cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)  # no warnings of a missing device:
+    try:  # the one line below says it, and a lost camera is retried every 2 s
+        capture = cv2.VideoCapture(index)
+    finally:
+        cv2.utils.logging.setLogLevel(quiet)
     if not capture.isOpened():
         raise InputError(f"device {index}", "cannot be opened (expected a connected camera)")
     encoder = None
@@ -154,13 +160,14 @@ def device_frames(index: int, time_offset: float, clock: Callable[[], float] = t
             if not ok:
                 return
             n += 1
-            if encoder is None:
+            if n == 1:
                 fps = capture.get(cv2.CAP_PROP_FPS) or 30.0
-                encoder, health.interval_s = H264Encoder(bgr.shape[1], bgr.shape[0], fps), 1.0 / fps
+                encoder = H264Encoder(bgr.shape[1], bgr.shape[0], fps) if encode else None
+                health.interval_s = 1.0 / fps
             t = health.stamp(grabbed)
             if t is None:  # not encoded either, so the recorded H.264 never refers to it
                 continue
-            packet, key = encoder.encode(bgr)
+            packet, key = encoder.encode(bgr) if encoder is not None else (b"", False)
             yield Frame(index=n - 1, time=t + time_offset, gray=cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY),
                         packet=packet or None, keyframe=key, video=health.report())
     finally:

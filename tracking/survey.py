@@ -356,6 +356,24 @@ def _initial_motion(rig: Rig, offsets: list[PairOffset], start: float, end: floa
     return model.p, model.w, *model.knots(model.linear_fit(np.zeros(model.size)))
 
 
+def surveyable(rig: Rig) -> dict[int, np.ndarray]:
+    """The markers a survey may move (by index in rig.markers): not the reference, with a survey σ of their own or the
+    rig's, every axis above 0; each one's prior σ (tilt rad, position m). None is a one-line InputError, found before
+    any footage is read."""
+    out = {}
+    for k, m in enumerate(rig.markers):
+        sigma = rig.marker_sigma(m)
+        if m.reference or sigma is None:
+            continue
+        prior = np.concatenate([sigma.tilt_rad(), sigma.position()])
+        if np.all(prior > 0):
+            out[k] = prior
+    if not out:
+        raise InputError(rig.path, "no marker to survey (expected survey_sigma, or a sigma on each marker that is not "
+                                   "the reference)", "survey_sigma")
+    return out
+
+
 def survey_markers(rig: Rig, measurements: Iterable[PairOffset | BodyObservation]) -> SurveyFit:
     """Every marker's pose refined from the footage's measurements (body observations with their corners, pair
     offsets for the first estimate of the topside's motion); times on the rig's clocks (sync them first)."""
@@ -365,15 +383,10 @@ def survey_markers(rig: Rig, measurements: Iterable[PairOffset | BodyObservation
     v = _views(rig, observations)
     counts = np.bincount(v.marker, minlength=len(rig.markers))
     free, priors = [], []
-    for k, m in enumerate(rig.markers):
-        sigma = rig.marker_sigma(m)
-        if m.reference or counts[k] < MIN_VIEWS or sigma is None:
-            continue
-        prior = np.concatenate([sigma.tilt_rad(), sigma.position()])
-        if np.any(prior <= 0):
-            continue
-        free.append(k)
-        priors.append(prior)
+    for k, prior in surveyable(rig).items():
+        if counts[k] >= MIN_VIEWS:
+            free.append(k)
+            priors.append(prior)
     if not free:
         raise InputError(rig.path, "no marker to survey (expected survey_sigma, or a sigma on each marker, and "
                                    f"markers seen in at least {MIN_VIEWS} frames)", "survey_sigma")

@@ -39,6 +39,20 @@ READY_TIMEOUT_S = 60.0  # the web server answers within a second; a loaded machi
 POLL_S = 0.05
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 VIEW_TMP_PREFIX = "topside-view-"
+CLEANUP_TIMEOUT_S = 5.0  # the folder's warden tries this long to remove it (a dying viewer may still be writing there)
+# The warden of a temporary folder: it leaves its parent (so topside's only child is its viewer), waits for the end of
+# its standard input, which comes when topside ends however it ends (a SIGKILL included: the kernel closes the pipe),
+# and removes the folder.
+WARDEN = """
+import os, shutil, sys, time
+if os.fork():
+    os._exit(0)
+sys.stdin.buffer.read()
+deadline = time.monotonic() + float(sys.argv[2])
+while os.path.lexists(sys.argv[1]) and time.monotonic() < deadline:
+    shutil.rmtree(sys.argv[1], ignore_errors=True)
+    time.sleep(0.1)
+"""
 ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
@@ -256,6 +270,24 @@ class StopSignals:
                 raise KeyboardInterrupt
 
 
+@contextmanager
+def work_folder(prefix: str = VIEW_TMP_PREFIX) -> Iterator[Path]:
+    """A temporary folder that does not outlive topside: removed when the block ends, and by a warden process
+    (WARDEN) within about a second when topside is killed (kill -9 runs no handler and no finally)."""
+    work = Path(tempfile.mkdtemp(prefix=prefix))
+    warden = None
+    try:
+        warden = subprocess.Popen([sys.executable, "-I", "-S", "-c", WARDEN, str(work), str(CLEANUP_TIMEOUT_S)],
+                                  stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                  start_new_session=True)  # a terminal's Ctrl-C is not its
+        warden.wait()  # the warden's first process, gone at once; its fork waits on the pipe
+        yield work
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+        if warden is not None and warden.stdin is not None:
+            warden.stdin.close()  # the warden finds the folder gone and ends
+
+
 def die_with_parent() -> None:
     """In a child before it runs (Linux): SIGTERM it when topside ends, even killed with SIGKILL."""
     if sys.platform.startswith("linux"):
@@ -343,9 +375,9 @@ def view_recording(recording: Path, start: float | None = None, end: float | Non
     if grpc is not None:  # taken by another viewer, Rerun would hand it the recording instead
         check_port_free(address, grpc, "--grpc-port")
     warn_if_exposed(address)
-    with StopSignals() as signals, tempfile.TemporaryDirectory(prefix=VIEW_TMP_PREFIX) as work:
-        opened = window_recording(recording, start, end, Path(work) / "window")
-        run_viewer(opened, web, address, grpc_port, web_port, Path(work), signals)
+    with StopSignals() as signals, work_folder() as work:
+        opened = window_recording(recording, start, end, work / "window")
+        run_viewer(opened, web, address, grpc_port, web_port, work, signals)
 
 
 def start_live_viewer(web: bool, bind: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT

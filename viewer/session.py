@@ -58,6 +58,7 @@ from viewer.recording import (
     topside_pose,
 )
 from viewer.superintendent import (
+    ConeReading,
     cone_reading,
     log_camera_health,
     log_cone_reading,
@@ -406,6 +407,15 @@ class Recorder:
         if update.now - self._board_logged >= BOARD_PERIOD_S:
             self._log_board(update)
         self._feed_viewer(update.now)
+
+    def readings(self) -> list[ConeReading]:
+        """Every cone's reading at the newest update's live time, as the recording's superintendent view has it (none
+        before the first update)."""
+        update = self._last_update
+        if update is None:
+            return []
+        return [cone_reading(self.status.latest.get(cone), cone, update.now, update.last_measurement, self.stale_s)
+                for cone in self.cones]
 
     def _feed_viewer(self, now: float) -> None:
         """Send the live viewer what it takes now, without waiting; once it is cut loose, nothing more is logged

@@ -20,7 +20,7 @@ The live image per cone is the 2-D view of the camera that measures that cone mo
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -136,6 +136,21 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
         return WITHHELD_SIGMA
     return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_M * 1e3:.0f} mm in the first "
             f"{REPORT_WARMUP_S:g} s after the topside is placed): the cameras do not see this cone well enough")
+
+
+def cones_line(readings: Sequence[ConeReading], stale_s: float = STALE_S) -> str:
+    """Every cone on one line of text, for a terminal or a log: its state, the horizontal distance from its target
+    and its σ, Δx Δy Δz in mm; or NO DATA and why, e.g. 'A GREEN 42±6 mm (Δx +30 Δy -29 Δz +412) · D NO DATA
+    (newest 2.1 s old)'."""
+    parts = []
+    for r in readings:
+        if r.state == ConeState.NO_DATA:
+            parts.append(f"{r.cone} NO DATA ({no_data_reason(r, stale_s, short=True)})")
+            continue
+        dx, dy, dz = (1000 * v for v in r.offset)
+        parts.append(f"{r.cone} {r.state.name} {1000 * r.concentricity:.0f}±{1000 * r.sigma:.0f} mm "
+                     f"(Δx {dx:+.0f} Δy {dy:+.0f} Δz {dz:+.0f})")
+    return " · ".join(parts)
 
 
 def cone_markdown(reading: ConeReading, stale_s: float = STALE_S) -> str:

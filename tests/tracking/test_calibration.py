@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracking.calibration import calibrate, parse_board
+from tracking.calibration import BoardView, calibrate, parse_board
 from tracking.errors import InputError
 
 PUBLISHED_K = np.array([[532.80992189, 0, 342.4952186], [0, 532.93346422, 233.8879292], [0, 0, 1]])
@@ -52,3 +52,26 @@ def test_too_few_views_refused(shared_data: Path) -> None:
 def test_bad_board(text: str) -> None:
     with pytest.raises(InputError, match="--board"):
         parse_board(text)
+
+
+def _view(name: str, shift_px: tuple[float, float], tilt: float = 0.0) -> BoardView:
+    """A 9x6 chessboard's corners as a camera at 800 px focal length sees it 1 m away, turned by tilt (rad) about the
+    board's x axis and moved by shift_px in the image."""
+    from tracking.calibration import BoardView
+
+    board = parse_board("chessboard:9x6:0.025")
+    obj = board.object_points().astype(float)
+    c, s = np.cos(tilt), np.sin(tilt)
+    p = obj @ np.array([[1, 0, 0], [0, c, s], [0, -s, c]]) + [-0.1, -0.06, 1.0]
+    img = 800 * p[:, :2] / p[:, 2:] + np.array([320.0, 240.0]) + shift_px
+    return BoardView(Path(name), img.astype(np.float32), board.object_points())
+
+
+def test_views_of_one_pose_are_told_apart_from_distinct_ones() -> None:
+    """A photo re-taken from a tripod (0.3 px off), the same photo twice: one pose; the board moved 40 px or tilted
+    20°: another each."""
+    from tracking.calibration import distinct_poses
+
+    views = [_view("a", (0, 0)), _view("b", (0.3, 0.2)), _view("c", (40, 0)), _view("a-again", (0, 0)),
+             _view("d", (0, 0), tilt=np.radians(20))]
+    assert distinct_poses(views) == [[0, 1, 3], [2], [4]]

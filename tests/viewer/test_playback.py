@@ -150,6 +150,32 @@ def test_the_server_ends_when_topside_is_killed(recording: Path, tmp_path: Path)
     assert not listening_addresses(web_port) and not listening_addresses(grpc_port)
 
 
+def test_a_killed_view_leaves_no_temporary_folder(recording: Path, tmp_path: Path) -> None:
+    """kill -9 of `view --web` on a window of a recording (a cut in its temporary folder): the folder is gone within
+    5 s, and so is the process that removed it."""
+    process, _, _, _ = serve(recording, tmp_path, "--from", "2", "--to", "5")
+    [folder] = tmp_path.glob("topside-view-*")
+    assert list(folder.glob("window/*"))
+    process.send_signal(signal.SIGKILL)
+    process.communicate(timeout=STOP_TIMEOUT_S)
+    killed = time.monotonic()
+    while folder.exists() and time.monotonic() < killed + 5.0:
+        time.sleep(0.05)
+    assert not folder.exists()
+    wardens = [p for p in Path("/proc").glob("[0-9]*/cmdline") if str(folder).encode() in _read(p)]
+    while wardens and time.monotonic() < killed + 5.0:
+        time.sleep(0.05)
+        wardens = [p for p in wardens if p.exists()]
+    assert wardens == []
+
+
+def _read(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError:
+        return b""
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGHUP])
 def test_web_view_on_localhost_stops_on_ctrl_c_twice_or_a_hangup(recording: Path, tmp_path: Path, signum: int) -> None:
     process, url, web_port, grpc_port = serve(recording, tmp_path, "--bind", "localhost")

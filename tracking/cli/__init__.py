@@ -4,7 +4,7 @@ The command line is the one place that composes everything: the tracker (trackin
 (viewer/) and the simulator (tracking/sim/); nothing imports it (the contracts in pyproject.toml, checked by
 lint-imports). Its commands live by group:
 
-    fieldwork.py   calibrate, detect, check, sync, survey (and their tables)
+    fieldwork.py   calibrate, detect, markers, check, sync, survey (and their tables)
     run.py         track, batch, evaluate, demo (track and batch share one run loop)
     archive.py     export, verify
     report.py      report
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import signal
 import sys
+from typing import Annotated
 
 import typer
 
@@ -31,11 +32,41 @@ app = typer.Typer(
     help="Watch an offshore topside being set down on its jacket, from cameras.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help (click): paragraphs re-wrapped to the terminal, nothing read as markup
     add_completion=False,
 )
-for command in (fieldwork.calibrate, fieldwork.detect, run.track, run.batch, archive.export, archive.verify,
-                report.report, view.view, live.live, fieldwork.sync, fieldwork.survey, sim.simulate, run.evaluate,
-                fieldwork.check, run.demo):
+VERSIONS_OF = ("opencv-contrib-python-headless", "rerun-sdk", "numpy")  # what decides the numbers, beside topside's
+
+
+def version_line() -> str:
+    """topside's version and those of Python and the packages that decide its numbers, on one line."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    def of(package: str) -> str:
+        try:
+            return version(package)
+        except PackageNotFoundError:
+            return "not installed"
+
+    others = ", ".join(f"{name.removesuffix('-contrib-python-headless')} {of(name)}" for name in VERSIONS_OF)
+    return f"topside {of('topside')} (Python {sys.version.split()[0]}, {others})"
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        print(version_line())
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(version: Annotated[bool, typer.Option("--version", help="Print the version and exit.",
+                                                   callback=_show_version, is_eager=True)] = False) -> None:
+    """Watch an offshore topside being set down on its jacket, from cameras."""
+
+
+for command in (fieldwork.calibrate, fieldwork.detect, fieldwork.markers, run.track, run.batch, archive.export,
+                archive.verify, report.report, view.view, live.live, fieldwork.sync, fieldwork.survey, sim.simulate,
+                run.evaluate, fieldwork.check, run.demo):
     app.command()(command)  # in this order in `topside --help`
 
 

@@ -1,5 +1,6 @@
 """The field engineer's commands and their tables: `calibrate` a camera, `detect` markers in an image or a video,
-`check` a rig before the lift, `sync` the cameras' clocks and `survey` the markers from footage."""
+print the rig's `markers`, `check` a rig before the lift, `sync` the cameras' clocks and `survey` the markers from
+footage."""
 
 from __future__ import annotations
 
@@ -15,12 +16,14 @@ from rich.table import Table
 
 from tracking.calibration import SUBPIX_WINDOW
 from tracking.cli.common import console, err_console, progress_bar, rig_inputs, warn_lines, warn_rig
-from tracking.cli.options import RefineOption, finite
+from tracking.cli.options import RefineOption, SheetFormat, finite
 from tracking.detection import DEFAULT_REFINEMENT
 from tracking.errors import InputError
 from tracking.outputs import atomic_path, check_outputs
 
 if TYPE_CHECKING:
+    from collections.abc import Iterator
+
     from tracking.calibration import CalibrationResult
     from tracking.camera import CameraModel
     from tracking.check import CheckReport
@@ -38,22 +41,26 @@ LEARNT_SHARE = 0.25  # a marker whose σ the footage cut by less than this share
 
 def calibrate(
     images: Annotated[list[Path], typer.Argument(help="Photos of the board, one camera, several views.")],
-    board: Annotated[str, typer.Option(help="chessboard:COLSxROWS:SQUARE (inner corners, m) or "
-                                            "charuco:COLSxROWS:SQUARE:MARKER:DICT (squares, m).")],
+    board: Annotated[str, typer.Option(help="The board, as written above: chessboard:... or charuco:...")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Camera file to write (OpenCV YAML).")],
-    fix_aspect: Annotated[bool, typer.Option("--fix-aspect", help="Keep fx = fy (CALIB_FIX_ASPECT_RATIO).")] = False,
+    fix_aspect: Annotated[bool, typer.Option("--fix-aspect", help="Keep fx = fy (OpenCV's fixed aspect ratio).")
+                          ] = False,
     rational: Annotated[bool, typer.Option("--rational", help="8-coefficient rational distortion model.")] = False,
     subpix_window: Annotated[int, typer.Option(help="Half-size of cornerSubPix's window, px (chessboard).",
                                                min=1, max=MAX_SUBPIX_WINDOW)] = SUBPIX_WINDOW,
 ) -> None:
-    """Calibrate one camera from photos of a chessboard or ChArUco board."""
+    """Calibrate one camera from photos of a chessboard or ChArUco board.
+
+    --board is chessboard:COLSxROWS:SQUARE (inner corners across and down, the square's side in m), e.g.
+    chessboard:9x6:0.025; or charuco:COLSxROWS:SQUARE:MARKER:DICT (squares across and down, the square's and the
+    marker's sides in m, the ArUco dictionary), e.g. charuco:7x5:0.04:0.03:DICT_5X5_100."""
     import tracking.calibration as calib
     from tracking.camera import save_camera
 
     spec = calib.parse_board(board)
     check_outputs({"--out": out}, images)
     with progress_bar() as progress:
-        task = progress.add_task("finding the board", total=len(images))
+        task = progress.add_task("finding the board", total=len(images), unit="photos")
         result = calib.calibrate(images, spec, fix_aspect=fix_aspect, rational=rational,
                                  subpix_window=subpix_window, progress=lambda: progress.advance(task))
     _print_calibration(result, len(images), fix_aspect)
@@ -85,13 +92,16 @@ def _print_calibration(result: CalibrationResult, n_images: int, fix_aspect: boo
                                                          " (σ not estimated)"))
     if result.missed:
         console.print(f"no board found in {len(result.missed)}: {', '.join(result.missed)}", style="yellow")
+    for photo, first in result.repeated.items():
+        warn_lines([f"{photo}: the board where {first} has it (the same pose: the view adds nothing)"])
     if result.coverage < calib.COVERAGE_WARN:
         console.print(f"warning: the board covered only {result.coverage:.0%} of the image "
                       "(corners and edges unseen); distortion is poorly determined there", style="yellow")
 
 
 def detect(
-    source: Annotated[Path, typer.Argument(help="An image or a video.")],
+    source: Annotated[str, typer.Argument(help="An image, a video, a camera's device index (0) or a stream URL "
+                                               "(rtsp://, http://).")],
     dictionary: Annotated[str | None, typer.Option(help="DICT_6X6_250 (default) or a dictionary YAML.")] = None,
     rig: Annotated[Path | None, typer.Option(help="Rig file: its dictionary, marker size and ids.")] = None,
     camera: Annotated[Path | None, typer.Option(help="Camera file: also estimate every marker's pose.")] = None,
@@ -101,25 +111,32 @@ def detect(
     as_json: Annotated[bool, typer.Option("--json", help="One JSON object per frame.")] = False,
     inverted: Annotated[bool, typer.Option("--inverted", help="Markers printed white on black (a rig says so "
                                                               "itself: inverted: true).")] = False,
+    max_frames: Annotated[int | None, typer.Option("--frames", min=1, help="Stop after this many frames (default: "
+                                                                           "all of a file; a camera or stream "
+                                                                           "until Ctrl-C).")] = None,
 ) -> None:
-    """Print the markers found in every frame: ids, corners (TL TR BR BL) and, given a camera, poses."""
+    """Print the markers found in every frame: ids, corners (TL TR BR BL) and, given a camera, poses.
+
+    A camera can be tried before the rig exists: `topside detect 0 --frames 30` (a device) or `topside detect
+    rtsp://10.0.0.5/stream1` shows the ids it sees and, with --camera, how far they are."""
+    import itertools
+
     from tracking.camera import load_camera
     from tracking.detection import MarkerDetector
-    from tracking.images import frames
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig) if rig else None
-    if the_rig is not None:
-        warn_rig(the_rig)
     if dictionary and the_rig and dictionary != the_rig.dictionary:
         raise InputError("--dictionary", f"{dictionary} differs from the rig's {the_rig.dictionary}")
     cam = load_camera(camera) if camera else None
+    if the_rig is not None:
+        warn_rig(the_rig)  # once the inputs are accepted: bad input stays the one line on stderr
     detector = MarkerDetector(dictionary or (the_rig.dictionary if the_rig else "DICT_6X6_250"), refine, cam,
                               inverted=inverted or bool(the_rig and the_rig.inverted))
     size = marker_size or (the_rig.marker_size if the_rig else 1.0)
     unknown: Counter[int] = Counter()  # ids not in the rig: detections
     n_frames = 0
-    for frame in frames(source):
+    for frame in itertools.islice(_source_frames(source), max_frames):
         n_frames += 1
         det = detector.detect(frame.gray)
         cam = _sized_camera(cam, frame, camera, source)
@@ -129,7 +146,21 @@ def detect(
         err_console.print(f"{n_frames} frames; markers not in the rig ignored: {summary}")
 
 
-def _sized_camera(cam: CameraModel | None, frame: Frame, camera: Path | None, source: Path) -> CameraModel | None:
+def _source_frames(source: str) -> Iterator[Frame]:
+    """The frames of what `detect` was given: a device index, a stream URL (kept as written: a Path would make
+    rtsp://host rtsp:/host), or an image or video file; live frames on the wall clock."""
+    from tracking.images import frames
+    from tracking.sources import SourceKind, device_frames, source_kind, stream_frames
+
+    kind = source_kind(source)
+    if kind == SourceKind.DEVICE:
+        return device_frames(int(source), 0.0, encode=False)
+    if kind == SourceKind.STREAM:
+        return stream_frames(source, 0.0)
+    return frames(Path(source))
+
+
+def _sized_camera(cam: CameraModel | None, frame: Frame, camera: Path | None, source: str) -> CameraModel | None:
     """The camera model for this frame: a calibration without a size takes the first frame's (with a warning); one
     for another size is bad input."""
     if cam is None:
@@ -145,7 +176,7 @@ def _sized_camera(cam: CameraModel | None, frame: Frame, camera: Path | None, so
 
 
 def _marker_entries(markers: list[MarkerDetection], cam: CameraModel | None, size: float, rig: Rig | None,
-                    rig_path: Path | None, source: Path, unknown: Counter[int]) -> list[dict]:
+                    rig_path: Path | None, source: str, unknown: Counter[int]) -> list[dict]:
     """A frame's markers as printed: id, corners (4, 2) and, with a camera, the pose. With a rig, an id it does not
     list is counted in unknown and left out (in a single image, it is bad input)."""
     from tracking.images import is_image
@@ -196,6 +227,44 @@ def _print_detections(frame: Frame, markers: list[dict], as_json: bool) -> None:
                           f"(other {p['alternative_error']:.3f}px, {p['choice']})")
 
 
+def markers(
+    rig: Annotated[Path, typer.Option(help="Rig file whose markers to print.")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="Folder for the sheets (made if missing).")],
+    fmt: Annotated[SheetFormat, typer.Option("--format", help="pdf (every cell a rectangle: sharp at any size) or "
+                                                              "png (at --dpi).")] = SheetFormat.PDF,
+    dpi: Annotated[float, typer.Option(help="Resolution of PNG sheets, dots per inch.",
+                                       callback=finite(0.0, high=2400.0))] = 150.0,
+) -> None:
+    """Write a printable sheet per marker of the rig, at print scale: the black square of marker_size as cv2.aruco
+    draws it, a white quiet zone around it, and a label with the marker's id, body, cone and face. Print at 100 %
+    (no fitting to the paper): the square then measures marker_size."""
+    import tracking.marker_sheets as ms
+    from tracking.rig import load_rig
+
+    the_rig = load_rig(rig)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "is a file (expected a folder for the sheets)", "--out")
+    pages = [ms.sheet(the_rig, m) for m in the_rig.markers]
+    paths = [out / ms.sheet_name(page.marker, fmt.value) for page in pages]
+    check_outputs({f"--out ({p.name})": p for p in paths}, [the_rig.path])
+    if fmt == SheetFormat.PNG and pages and (biggest := max(ms.png_pixels(p, dpi) for p in pages)) > ms.MAX_PNG_PIXELS:
+        raise InputError("--dpi", f"{dpi:g} dpi makes a page of {biggest / 1e6:.0f} Mpx (expected at most "
+                                  f"{ms.MAX_PNG_PIXELS / 1e6:.0f}: a lower --dpi, or --format pdf)")
+    warn_rig(the_rig)
+    out.mkdir(parents=True, exist_ok=True)
+    table = Table(title=f"marker sheets of {rig} ({the_rig.dictionary}, black square {the_rig.marker_size * 1000:.0f} "
+                        "mm)")
+    for col in ("marker", "body", "cone", "face", "page [mm]", "file"):
+        table.add_column(col, justify="right" if col in ("marker", "page [mm]") else "left")
+    for page, path in zip(pages, paths, strict=True):
+        ms.write_sheet(page, path, fmt.value, dpi)
+        width, height = page.page_m
+        table.add_row(str(page.marker.id), page.marker.body, page.marker.cone, page.marker.face,
+                      f"{width * 1000:.0f} × {height * 1000:.0f}", str(path))
+    console.print(table)
+    console.print(f"wrote {len(pages)} sheets to {out}: print each at 100 % (actual size)", markup=False)
+
+
 def check(
     rig: Annotated[Path, typer.Option(help="Rig file of the installation.")],
     seconds: Annotated[float, typer.Option(help="Seconds of each camera to read.",
@@ -216,11 +285,11 @@ def check(
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_outputs({"--rrd": rrd}, rig_inputs(the_rig))
+    warn_rig(the_rig)
     with progress_bar() as progress:
-        progress.add_task(f"reading {seconds:g} s of {len(the_rig.cameras)} cameras", total=None)
-        report = check_rig(the_rig, seconds, refine)
+        task = progress.add_task(f"reading {seconds:g} s of {len(the_rig.cameras)} cameras", total=None, unit="frames")
+        report = check_rig(the_rig, seconds, refine, on_frame=lambda: progress.advance(task))
     warn_lines(report.warnings)
     _print_check(report)
     if rrd is not None:
@@ -365,21 +434,22 @@ def sync(
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_outputs({"--out": out}, rig_inputs(the_rig))
     if reference is not None and reference not in {c.name for c in the_rig.cameras}:
         raise InputError(reference, f"is not a camera of {rig} (expected one of "
                                     f"{', '.join(c.name for c in the_rig.cameras)})", "--reference")
+    warn_rig(the_rig)
     t0 = time.perf_counter()
     with progress_bar() as progress:
-        progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None)
-        offsets, _, seconds = footage_measurements(the_rig, refine, observations=False)
+        task = progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None, unit="frames")
+        offsets, _, seconds = footage_measurements(the_rig, refine, observations=False,
+                                                   on_frame=lambda _: progress.advance(task))
         t1 = time.perf_counter()
         clocks = synchronise(the_rig, offsets, reference)
     console.print(clock_table(clocks))
     for line in clock_lines(clocks):
         console.print(line, markup=False)
-    write_rig(synced_rig(the_rig, clocks), out)
+    write_rig(synced_rig(the_rig, clocks), out, the_rig)
     console.print(f"wrote {out} · {seconds / 60:.1f} camera-minutes: measured in {t1 - t0:.0f} s, fitted in "
                   f"{time.perf_counter() - t1:.1f} s", markup=False)
     if not all(c.known for c in clocks):
@@ -425,17 +495,19 @@ def survey(
 
     from tracking.fieldwork import footage_measurements, write_rig
     from tracking.rig import load_rig
-    from tracking.survey import survey_markers, surveyed_rig
+    from tracking.survey import survey_markers, surveyable, surveyed_rig
 
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_outputs({"--out": out}, rig_inputs(the_rig))
     if start is not None and end is not None and end <= start:
         raise InputError("--to", f"{end:g} s is not after --from {start:g} s (expected a stretch of footage)")
+    surveyable(the_rig)  # a rig with nothing to survey is refused before any footage is read
+    warn_rig(the_rig)
     t0 = time.perf_counter()
     with progress_bar() as progress:
-        progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None)
-        offsets, observations, seconds = footage_measurements(the_rig, refine, start, end)
+        task = progress.add_task(f"measuring {len(the_rig.cameras)} cameras", total=None, unit="frames")
+        offsets, observations, seconds = footage_measurements(the_rig, refine, start, end,
+                                                              on_frame=lambda _: progress.advance(task))
         t1 = time.perf_counter()
         fit = survey_markers(the_rig, [*offsets, *observations])
     console.print(survey_table(the_rig, fit))
@@ -443,7 +515,7 @@ def survey(
                   "cannot tell where that marker sits)", markup=False)
     for line in survey_lines(the_rig, fit):
         console.print(line, markup=False)
-    write_rig(surveyed_rig(the_rig, fit), out)
+    write_rig(surveyed_rig(the_rig, fit), out, the_rig)
     console.print(f"wrote {out} · {seconds / 60:.1f} camera-minutes: measured in {t1 - t0:.0f} s, fitted in "
                   f"{time.perf_counter() - t1:.1f} s ({fit.iterations} iterations)", markup=False)
     if any(s.flagged for s in fit.markers):

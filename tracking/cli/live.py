@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -30,7 +30,9 @@ if TYPE_CHECKING:
     from tracking.rig import Rig
     from viewer.foxglove_live import FoxgloveStream
     from viewer.session import Recorder
+    from viewer.superintendent import ConeReading
 
+CONES_PERIOD_S = 1.0  # the cones' line on a terminal changes at most this often (wall time): readable, and cheap
 LIVE_SEGMENT_MIN = 1.0  # a minute a file: quick to open, and `topside view --from --to` picks the window
 LIVE_ESTIMATE_PERIOD_S = 1 / 30  # the recording keeps a cone's estimates at up to 30 Hz (the CSV keeps all)
 GRPC_PORT_DEFAULT = 9876  # viewer.playback.GRPC_PORT
@@ -38,8 +40,8 @@ FOXGLOVE_PORT_DEFAULT = 8765  # Foxglove's own default for a WebSocket server
 
 RigOption = Annotated[Path, typer.Option(help="Rig file; each camera's source is a device index, a stream URL "
                                               "(rtsp://, http://) or a video file replayed at its frame rate.")]
-RrdOption = Annotated[Path | None, typer.Option(help="Recording to write, in segments <stem>-NNN.rrd (default: "
-                                                     "recordings/live-<date>-<time>.rrd).")]
+RrdOption = Annotated[Path | None, typer.Option(help="Recording to write, in segments STEM-NNN.rrd (default: "
+                                                     "live-DATE-TIME.rrd in recordings/).")]
 OutOption = Annotated[Path | None, typer.Option("-o", "--out", help="Offsets CSV, written as they are measured "
                                                                     "(default: beside the recording).")]
 SpawnOption = Annotated[bool, typer.Option("--spawn", help="Stream to a native viewer.")]
@@ -94,23 +96,33 @@ def live(
     if spawn and web:
         raise InputError("--spawn/--web", "choose one viewer")
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_sources(the_rig)  # a missing or unreadable video, or files mixed with devices: refused before any file
     rrd, out = _session_files(the_rig, rrd, out)
     fox_address = _check_ports(bind, spawn, web, foxglove, port, grpc_port, web_port)
+    warn_rig(the_rig)  # once the inputs are accepted: bad input stays the one line on stderr
     viewer_process = start_live_viewer(web, bind, grpc_port, web_port) if spawn or web else None
     if web:
         console.print(f"web viewer: {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}")
-    session = LiveSession(the_rig, rrd, out, viewer_process=viewer_process)
+    session = LiveSession(the_rig, rrd, out, viewer_process=viewer_process, stale_s=stale)
+    written = ""
     try:
         if fox_address is not None:
             session.fox = _foxglove(the_rig, fox_address, port, warn=not (spawn or web))
-        session.record(speed, duration, segment_minutes * 60, stale, layout, viewer_scope, loop)
+        replay_over = session.record(speed, duration, segment_minutes * 60, layout, viewer_scope, loop)
+        if replay_over and viewer_process is not None:  # the files ended: what they showed stays on view
+            session.finish()
+            console.print(written := session.written(), markup=False)
+            what = f"the web viewer keeps serving at {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}" \
+                if web else "the viewer keeps showing it"
+            err_console.print(f"the replay has ended; {what} until Ctrl-C", markup=False)
+            viewer_process.wait()  # Ctrl-C, SIGTERM, or the viewer's window closed
     except KeyboardInterrupt:
-        err_console.print("stopped")
+        if not written:
+            err_console.print("stopped")
     finally:
         session.close()
-    console.print(f"wrote {session.rows} rows to {out}; recording {rrd.with_name(rrd.stem + '-*.rrd')}")
+    if not written:
+        console.print(session.written(), markup=False)
 
 
 def _session_files(rig: Rig, rrd: Path | None, out: Path | None) -> tuple[Path, Path]:
@@ -166,20 +178,24 @@ class LiveSession:
     out: Path
     outputs: Outputs = field(default_factory=Outputs)
     viewer_process: subprocess.Popen | None = None
+    stale_s: float = 0.5  # a cone's newest measurement older than this: NO DATA
     fox: FoxgloveStream | None = None
     recorder: Recorder | None = None
     writer: OffsetsWriter | None = None
+    finished: bool = False  # the recording closed and the files under their final names
+    duration_over: bool = False  # the session ended after its --duration (not because its sources did)
 
     @property
     def rows(self) -> int:
         """Offsets written so far."""
         return self.writer.rows if self.writer is not None else 0
 
-    def record(self, speed: float, duration: float | None, segment_s: float, stale_s: float, layout: Layout,
-               viewer_scope: ViewerScope, loop: bool = False) -> None:
+    def record(self, speed: float, duration: float | None, segment_s: float, layout: Layout,
+               viewer_scope: ViewerScope, loop: bool = False) -> bool:
         """Track every camera (video files replayed at speed, again and again with loop) until duration s of capture
         time (None: until stopped) into the recording, in segment_s files and streamed to the viewer the tool started
-        (through its stdin, never waited for), and the offsets CSV."""
+        (through its stdin, never waited for), and the offsets CSV; the cones on a line of the terminal. True when
+        it ended because its sources did (a replay's files), False after duration."""
         from tracking.live import LiveTracker
         from tracking.offsets_csv import OffsetsWriter
         from viewer.feed import ViewerFeed
@@ -188,21 +204,25 @@ class LiveSession:
         feed = None
         if self.viewer_process is not None and self.viewer_process.stdin is not None:
             feed = ViewerFeed(self.viewer_process.stdin)
-        self.recorder = Recorder(self.rig, self.rrd, viewer=feed, segment_s=segment_s, stale_s=stale_s,
+        self.recorder = Recorder(self.rig, self.rrd, viewer=feed, segment_s=segment_s, stale_s=self.stale_s,
                                  layout=layout.value, estimate_period_s=LIVE_ESTIMATE_PERIOD_S,
                                  viewer_scope=viewer_scope.value, forward=[self.fox] if self.fox is not None else [])
         with OffsetsWriter(self.outputs.claim(self.out)) as self.writer:
             console.print(f"recording to {self.rrd.with_name(self.rrd.stem + '-*.rrd')} and {self.writer.path} "
                           f"(renamed {self.out.name} when the session ends)", markup=False, soft_wrap=True)
-            with LiveTracker(self.rig, speed=speed, loop_until=math.inf if loop else None) as tracker:
+            with LiveTracker(self.rig, speed=speed, loop_until=math.inf if loop else None) as tracker, \
+                    ConesLine(self.stale_s) as cones:
                 console.print(f"live: {len(tracker.names)} cameras; Ctrl-C stops and keeps everything recorded")
-                for e in self._estimates(tracker, duration):
+                estimates = self._estimates(tracker, duration, cones)
+                for e in estimates:
                     self.writer.write(e)
+                return not self.duration_over
 
-    def _estimates(self, tracker: LiveTracker, duration: float | None) -> Iterator[ConeEstimate]:
-        """The fused estimates as the cameras' frames come, each update recorded and its camera events and frames'
-        warnings printed; they end after duration s of capture time."""
+    def _estimates(self, tracker: LiveTracker, duration: float | None, cones: ConesLine) -> Iterator[ConeEstimate]:
+        """The fused estimates as the cameras' frames come, each update recorded, its camera events and frames'
+        warnings printed and the cones' line refreshed when due; they end after duration s of capture time."""
         start = None  # capture time of the first frame
+        assert self.recorder is not None
         for update in tracker.updates():
             self.recorder.on_update(update)
             for event in update.events:
@@ -210,10 +230,27 @@ class LiveSession:
             yield from update.estimates
             for result in update.results:
                 warn_lines(result.warnings)
+            cones.show(self.recorder.readings)
             if update.results:
                 start = update.results[0].time if start is None else start
                 if duration is not None and update.results[-1].time - start >= duration:
+                    self.duration_over = True
                     return
+
+    def written(self) -> str:
+        """The line saying what the session wrote."""
+        return f"wrote {self.rows} rows to {self.out}; recording {self.rrd.with_name(self.rrd.stem + '-*.rrd')}"
+
+    def finish(self) -> None:
+        """Close the recording and keep what was measured under its final names (the viewer stays)."""
+        if self.finished:
+            return
+        self.finished = True
+        try:
+            if self.recorder is not None:
+                self.recorder.close()
+        finally:
+            self.outputs.commit()
 
     def close(self) -> None:
         """Close the recording, keep what was measured under its final names (the record of the lift, however the
@@ -221,11 +258,59 @@ class LiveSession:
         from viewer.playback import stop_viewer
 
         try:
-            if self.recorder is not None:
-                self.recorder.close()
+            self.finish()
         finally:
-            self.outputs.commit()
             if self.viewer_process is not None:  # the viewers the tool starts end with it
                 stop_viewer(self.viewer_process)
             if self.fox is not None:
                 self.fox.close()
+
+
+class ConesLine:
+    """Every cone's reading on the terminal during a live session, as the superintendent's view has it (the offsets
+    in mm, or NO DATA and why), so an operator whose tablet fails still sees them: on a terminal one line kept under
+    the camera events, rewritten at most every CONES_PERIOD_S; in a log, a timestamped line every progress
+    interval (10 s)."""
+
+    def __init__(self, stale_s: float) -> None:
+        from rich.live import Live
+
+        from tracking.cli.common import progress_interval
+
+        self.stale_s = stale_s
+        terminal = err_console.is_terminal
+        self.period_s = CONES_PERIOD_S if terminal else progress_interval()
+        self.live = Live(console=err_console, auto_refresh=False, transient=True) if terminal else None
+        self.shown = -math.inf
+        self.text = ""
+
+    def __enter__(self) -> ConesLine:
+        if self.live is not None:
+            self.live.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.live is not None:
+            self.live.stop()
+            if self.text:  # the last reading stays on the terminal
+                err_console.print(self.text, markup=False)
+
+    def show(self, readings: Callable[[], Sequence[ConeReading]]) -> None:
+        """The cones' line from readings(), when one is due."""
+        from rich.text import Text
+
+        from tracking.cli.common import stamp
+        from viewer.superintendent import cones_line
+
+        now = time.monotonic()
+        if now - self.shown < self.period_s:
+            return
+        found = readings()
+        if not found:
+            return
+        self.shown = now
+        self.text = f"cones: {cones_line(found, self.stale_s)}"
+        if self.live is not None:
+            self.live.update(Text(self.text), refresh=True)
+        else:
+            err_console.print(f"{stamp()} topside: {self.text}", markup=False)

@@ -49,6 +49,13 @@ class ViewerScope(StrEnum):
     ALL = "all"
 
 
+class SheetFormat(StrEnum):
+    """The file format of `topside markers`' sheets: tracking.marker_sheets.FORMATS."""
+
+    PDF = "pdf"
+    PNG = "png"
+
+
 RefineOption = Annotated[Refinement, typer.Option(help="Corner refinement.")]
 
 # Options shared by `track --mcap` and `export`.

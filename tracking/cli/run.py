@@ -20,6 +20,7 @@ import typer
 from tracking.cli.archive import ArchiveSettings, archive_sink
 from tracking.cli.common import (
     EXIT_INTERRUPTED,
+    Reporter,
     console,
     err_console,
     one_line,
@@ -49,7 +50,7 @@ from tracking.outputs import Outputs, check_outputs
 
 if TYPE_CHECKING:
     import pandas as pd
-    from rich.progress import Progress, TaskID
+    from rich.progress import TaskID
 
     from tracking.batch import Installation, Outcome
     from tracking.estimate import ConeEstimate
@@ -172,30 +173,26 @@ def track(
     (--ray) and fused here in capture-time order: the output is the same whatever runs the chunks."""
     from tracking.estimator import ESTIMATORS, FilterReport
     from tracking.evaluate import read_truth
-    from tracking.parallel import plan_rig, runner
+    from tracking.parallel import runner
     from tracking.pipeline import TrackStats
     from tracking.rig import load_rig
 
     the_rig = load_rig(rig)
-    warn_rig(the_rig)
     check_outputs({"--out": out, "--rrd": rrd, "--mcap": mcap}, [*rig_inputs(the_rig), truth, key])
     truth_df = read_truth(truth) if truth else None
     archive = ArchiveSettings.for_track(mcap, key, vessel, operator, video)  # before any work
     options = {"mode": mode.value, "refine": refine.value, **({"roi": "on"} if roi else {})}
     report = FilterReport()
-    plans = plan_rig(the_rig, chunk_frames=chunk_frames)
     outputs = Outputs(keep_on_interrupt=True)
-    loop = RunLoop(the_rig, runner(workers, ray), refine, plans, TrackStats(), roi=roi, warn=True)
+    loop = RunLoop(the_rig, runner(workers, ray), refine, [], TrackStats(), roi=roi, warn=True)
     try:
         with outputs, progress_bar() as progress:
+            _plan(loop, progress, chunk_frames)
             csv = outputs.claim(out)
             if rrd is not None:
                 loop.sinks.append(recorder(the_rig, outputs.claim(rrd), truth_df, options, show_rejected=rejected))
             if archive is not None:
                 loop.sinks.append(archive_sink(the_rig, outputs.claim(mcap), options, truth_df, archive, csv))
-            task = progress.add_task(f"tracking {len(the_rig.cameras)} cameras",
-                                     total=sum(p.frames for p in plans) or None)
-            loop.advance = lambda: progress.advance(task)
             loop.write(csv, ESTIMATORS[mode], report)
     except KeyboardInterrupt:
         kept = ", ".join(map(str, outputs.kept)) or "nothing"
@@ -207,6 +204,20 @@ def track(
     _print_track_outputs(loop.rows, out, rrd, mcap)
     if mode in (Mode.FUSED, Mode.SMOOTHED):
         _rig_findings(rig, report)
+
+
+def _plan(loop: RunLoop, progress: Reporter, chunk_frames: int) -> None:
+    """The rig's videos cut into chunks (their keyframes found) under a progress task, then the rig's warnings (once
+    every input is read: bad input stays the one line on stderr); the task then counts the frames tracked."""
+    from tracking.parallel import plan_rig
+
+    cameras = len(loop.rig.cameras)
+    task = progress.add_task(f"finding the keyframes of {cameras} videos", total=None)
+    loop.plans = plan_rig(loop.rig, chunk_frames=chunk_frames)
+    warn_rig(loop.rig)
+    progress.update(task, description=f"tracking {cameras} cameras", total=sum(p.frames for p in loop.plans) or None,
+                    unit="frames")
+    loop.advance = lambda: progress.advance(task)
 
 
 def _print_track_summary(rig: Rig, rig_path: Path, mode: Mode, stats: TrackStats) -> None:
@@ -287,14 +298,15 @@ def batch(
     from tracking.parallel import runner
 
     installations = load_manifest(manifest)
-    prepared = [_prepare(inst, chunk_frames) for inst in installations]  # every rig and keyframe read before any work
     run = runner(workers, ray)
     outcomes: list[Outcome] = []
     started = time.perf_counter()
     try:
         with progress_bar() as progress:
-            total = sum(p.frames for one in prepared for p in one.plans) or None
-            task = progress.add_task(f"{len(installations)} installations on {run.workers} workers", total=total)
+            task = progress.add_task(f"finding the keyframes of {len(installations)} installations", total=None)
+            prepared = [_prepare(inst, chunk_frames) for inst in installations]  # every rig and keyframe, first
+            progress.update(task, description=f"{len(installations)} installations on {run.workers} workers",
+                            total=sum(p.frames for one in prepared for p in one.plans) or None, unit="frames")
             for one in prepared:
                 progress.update(task, description=f"{one.inst.label} ({len(outcomes) + 1}/{len(installations)})")
                 outcomes.append(_batch_one(one, run, refine, progress, task))
@@ -317,7 +329,7 @@ def _prepare(inst: Installation, chunk_frames: int) -> Prepared:
         return Prepared(inst, None, [], one_line(exc))
 
 
-def _batch_one(one: Prepared, run: Runner, refine: Refinement, progress: Progress, task: TaskID) -> Outcome:
+def _batch_one(one: Prepared, run: Runner, refine: Refinement, progress: Reporter, task: TaskID) -> Outcome:
     """One installation of a batch: its outputs, or its one-line failure (the frames it did not track are counted
     off the progress bar)."""
     import time
@@ -452,16 +464,26 @@ def demo(
     from viewer.playback import has_display
 
     scene = out / "demo"
-    console.rule(f"1/3 simulate {DEMO_SCENARIO} ({duration:.0f} s)")
+    _rule(f"1/3 simulate {DEMO_SCENARIO} ({duration:.0f} s)")
     run_simulate(DEMO_SCENARIO, scene, seed=None, duration=duration)
-    console.rule("2/3 track (all cameras fused) and record")
+    _rule("2/3 track (all cameras fused) and record")
     rrd = out / "demo.rrd"
     csv = out / "demo-offsets.csv"
     track(rig=scene / "rig.yaml", out=csv, mode=Mode.FUSED, refine=DEFAULT_REFINEMENT, rrd=rrd,
           truth=scene / "truth.csv", rejected=False)
-    console.rule("3/3 accuracy against the simulator's truth")
+    _rule("3/3 accuracy against the simulator's truth")
     evaluate(runs=[csv, scene / "truth.csv"], name="demo", markdown=out / "demo-accuracy.md", plots=None)
     if not no_viewer and has_display():
         view(recording=rrd, start=None, end=None, web=False, bind="127.0.0.1")
     else:
         console.print(f"open the recording with:  .venv/bin/topside view {rrd}   (or --web for a browser)")
+
+
+RULE_WIDTH = 100  # columns of the demo's step rules at most (a log's console is far wider: common.LOG_WIDTH)
+
+
+def _rule(title: str) -> None:
+    """A step's rule across the terminal, or RULE_WIDTH columns in a log."""
+    from rich.rule import Rule
+
+    console.print(Rule(title), width=min(console.width, RULE_WIDTH))

@@ -235,10 +235,14 @@ def load_private_key(path: Path) -> Ed25519PrivateKey:
 
 
 def load_public_key(path: Path) -> Ed25519PublicKey:
-    """An ed25519 public key from a PEM file (a private key's public half is taken too)."""
+    """An ed25519 public key from a PEM file. A private key is refused: a signature checked against the key that made
+    it proves nothing to an auditor (who holds it can sign any archive), and the private key belongs on the signing
+    machine only; the line says how to take its public half."""
     key = _load_key(path)
     if isinstance(key, Ed25519PrivateKey):
-        return key.public_key()
+        raise InputError(path, "is a private key; verify checks a signature against the signer's public key (make "
+                               f"it where the private key lives: openssl pkey -in {path} -pubout -out public.pem)",
+                         "--key")
     if not isinstance(key, Ed25519PublicKey):
         raise InputError(path, "is not an ed25519 key (expected PEM 'BEGIN PUBLIC KEY')", "key")
     return key
