@@ -12,9 +12,7 @@ machine's 2 shared cores, so the benchmark renders LONG_SECONDS and states what 
 from __future__ import annotations
 
 import json
-import math
 import pickle
-import statistics
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -29,12 +27,14 @@ from tracking.offsets_csv import write_offsets_csv
 from tracking.parallel import InPlace, LocalPool, track_chunks
 from tracking.pipeline import TrackStats
 from tracking.rig import Rig, load_rig, save_rig
-from tracking.split import LEAD_IN_S, SEGMENT_S, Segment, SegmentTask, SplitInfo, fuse, split_estimates
+from tracking.split import LEAD_IN_S, SEGMENT_S, SplitInfo, split_estimates
 
 LONG_SECONDS = 480.0  # 8 min of 8 cameras: 25 min of CPU to render (an hour would take 3 h)
 OVERLAPS = (5.0, 10.0, 20.0, 30.0)  # lead-ins whose agreement is measured
 AGREEMENT_SEGMENT_S = 60.0  # segments of the agreement runs: 7 boundaries in the 8 minutes (the default, 300 s,
 # gives 1); a segment's agreement depends on its lead-in, not on its length
+DRIVER_SEGMENT_S = 120.0  # segments of the driver's own cost: at the default 300 s, segment 0 (fused on the driver,
+# taken off) would be most of the 8 minutes; 120 s overstates the lead-in's share (17 % against 7 %) a little
 SMOOTHED_CAMERAS = 4  # the smoothed mode's agreement on the first four cameras (configuration 2's own) ...
 SMOOTHED_SECONDS = 180.0  # ... and the first 3 minutes: with eight its backward pass takes 2.2 s a capture second
 HOURS = 6.0
@@ -68,8 +68,9 @@ def render_cost(seconds: float) -> dict:
 
 
 def track_once(rig_path: Path, make: Callable[[], Any], one_pass: bool, csv: Path, keep: list | None = None) -> dict:
-    """One timed `track` (fused mode, offsets CSV, no sinks) on a fresh runner: wall and the main process's CPU,
-    the workers' CPU (chunks, segments), frames, load; keep gets every measurement."""
+    """One timed `track` (fused mode, offsets CSV, no sinks: lean chunks) on a fresh runner: wall and the main
+    process's CPU, the workers' CPU (chunks, segments), frames, load; keep gets every measurement, and "chunks" every
+    chunk's result as a worker sends it (pickled)."""
     rig = load_rig(rig_path)
     run = make()
     t0 = time.perf_counter()
@@ -81,7 +82,7 @@ def track_once(rig_path: Path, make: Callable[[], Any], one_pass: bool, csv: Pat
     t0, c0 = time.perf_counter(), time.process_time()
 
     def measurements() -> Iterator[Measurement]:
-        for r in track_chunks(rig, run, stats=stats, scheduler=sched):
+        for r in track_chunks(rig, run, stats=stats, scheduler=sched, lean=True):
             stats.add(r)
             for m in r.measurements:
                 if keep is not None:
@@ -102,7 +103,8 @@ def track_once(rig_path: Path, make: Callable[[], Any], one_pass: bool, csv: Pat
     return {"wall": wall, "main_cpu": cpu, "startup": startup, "frames": sum(stats.frames.values()),
             "load": (before, load()), "chunk_cpu": chunk_cpu, "segment_cpu": segment_cpu,
             "driver_cpu": cpu - (chunk_cpu + segment_cpu if inplace else 0.0), "segments": info.segments or 1,
-            "csv": csv.read_bytes()}
+            "csv": csv.read_bytes(),
+            "chunks": {(r.chunk.camera, r.chunk.number): pickle.dumps(r) for r in done} if keep is not None else {}}
 
 
 LONG_CONFIGS = (("1 worker, one pass", InPlace, True), ("1 worker, split", InPlace, False),
@@ -110,7 +112,7 @@ LONG_CONFIGS = (("1 worker, one pass", InPlace, True), ("1 worker, split", InPla
 
 
 def long_runs(rig_path: Path, work: Path) -> tuple[list[dict], list[Measurement]]:
-    """The long scene tracked by each LONG_CONFIGS once, in turn; the measurements of the first."""
+    """The long scene tracked by each LONG_CONFIGS once, in turn; the measurements of the first (and its chunks)."""
     kept: list[Measurement] = []
     out = []
     for k, (name, make, one_pass) in enumerate(LONG_CONFIGS):
@@ -242,28 +244,10 @@ def agreement(rig: Rig, measurements: list[Measurement], mode: str, overlaps: tu
             "rows": rows}
 
 
-def pickling_cost(rig: Rig, measurements: list[Measurement]) -> float:
-    """CPU ms per frame the driver spends sending a segment (SEGMENT_S of measurements, pickled) and taking its
-    estimates back (unpickled)."""
-    t0 = measurements[0].time
-    part = tuple(m for m in measurements if m.time < t0 + 60.0)
-    segment = Segment(1, t0 + LEAD_IN_S, math.inf)
-    result = fuse(rig, "fused", part, segment, poses=False)
-    n = sum(1 for _ in frames(part))
-    task = SegmentTask(Path(rig.path or ""), "fused", segment, part)
-    times = []
-    for _ in range(3):
-        c0 = time.process_time()
-        pickle.dumps(task)
-        pickle.loads(pickle.dumps(result))
-        times.append(time.process_time() - c0)
-    return 1000 * statistics.median(times) / n
-
-
-def project(c: float, f: float, d: float, chunk_over: float, efficiency: float) -> list[tuple]:
+def project(c: float, f: float, d_one: float, d: float, chunk_over: float, efficiency: float) -> list[tuple]:
     """Wall time of HOURS × CAMERAS on 1, 8 and 64 nodes of CORES_PER_NODE, one pass and split: (nodes, cores,
-    one pass s, its bound, split s, its bound). c, f, d: detection, fusion and the driver's CPU s per frame (the
-    driver's merging, CSV and, split, the segments' pickling); chunk_over: a chunk's fixed cost per frame."""
+    one pass s, its bound, split s, its bound). c, f: detection's and fusion's CPU s per frame; d_one, d: the
+    driver's own, one pass and split; chunk_over: a chunk's fixed cost per frame."""
     frames_n = HOURS * 3600 * FPS * CAMERAS
     per = (c + chunk_over) / efficiency  # a core's seconds per frame tracked, as 2 workers achieved here
     lead = LEAD_IN_S / SEGMENT_S
@@ -271,7 +255,7 @@ def project(c: float, f: float, d: float, chunk_over: float, efficiency: float) 
     out = []
     for nodes in NODES:
         cores = nodes * CORES_PER_NODE
-        one_work, one_driver = frames_n * per / (cores - 1), frames_n * (f + d)
+        one_work, one_driver = frames_n * per / (cores - 1), frames_n * (f + d_one)
         one = max(one_work, one_driver)
         split_work = frames_n * (per + f * (1 + lead)) / (cores - 1)
         split_driver = frames_n * d + SEGMENT_S * FPS * CAMERAS * f  # and segment 0 fused on the driver
@@ -292,13 +276,22 @@ def measure(work: Path, seconds: float = LONG_SECONDS) -> dict:
     runs, kept = long_runs(rig_path, work)
     rig = load_rig(rig_path)
     fused = agreement(rig, kept, "fused", OVERLAPS)
+    t0 = kept[0].time
+    head = [m for m in kept if m.time < t0 + DRIVER_SEGMENT_S]
+    c0 = time.process_time()
+    for _ in ESTIMATORS["fused"](rig, iter(head)):
+        pass
+    head_cpu = time.process_time() - c0
+    recorded = runs[0].pop("chunks")
+    driver = {"one pass": driver_cost(rig_path, recorded, None, work / "driver.csv"),
+              "split": driver_cost(rig_path, recorded, DRIVER_SEGMENT_S, work / "driver.csv"),
+              "head_cpu": head_cpu}
+    del recorded
     small = sub_rig(rig, SMOOTHED_CAMERAS, work)
     names = {c.name for c in small.cameras}
-    t0 = kept[0].time
     part = [m for m in kept if m.camera in names and m.time < t0 + SMOOTHED_SECONDS]
     smoothed = agreement(small, part, "smoothed", OVERLAPS)
-    pickled = pickling_cost(rig, kept)
-    return {"render": cost, "runs": runs, "fused": fused, "smoothed": smoothed, "pickling_ms": pickled,
+    return {"render": cost, "runs": runs, "fused": fused, "smoothed": smoothed, "driver": driver,
             "measurements": len(kept)}
 
 
@@ -310,8 +303,9 @@ def section(m: dict, chunk_over_s: float, efficiency: float) -> list[str]:
     c = base["chunk_cpu"] / frames_n  # detection, one thread
     f = m["fused"]["one_ms"] / 1000 * m["fused"]["frames"] / frames_n  # fusion per video frame
     two = runs["2 workers, one pass"]
-    d_merge = max(two["main_cpu"] / frames_n - f, 0.0)  # the driver's own: merging, receiving, the CSV
-    d = d_merge + m["pickling_ms"] / 1000
+    drv = m["driver"]
+    d_one = (drv["one pass"]["cpu"] - f * frames_n) / frames_n  # the driver's own: receiving, merging, the CSV
+    d = (drv["split"]["cpu"] - drv["head_cpu"]) / frames_n  # split: and cutting, sending, taking back, joining
     render = m["render"]
     lines = [
         "## One long installation: fusion split over time",
@@ -326,8 +320,8 @@ def section(m: dict, chunk_over_s: float, efficiency: float) -> list[str]:
         "",
         "Each configuration tracked the scene once, in turn (fused mode, offsets CSV, no recording), as "
         f"`topside track --workers N [--one-pass-fusion]` does: split, segments of {SEGMENT_S:g} s (the default) "
-        f"each read from {LEAD_IN_S:g} s before its start, so this run is {runs['1 worker, split']['segments']} "
-        "segments; start-up (spawning the workers) timed apart.",
+        f"each read from {LEAD_IN_S:g} s before its start: {runs['1 worker, split']['segments']} segments here, the "
+        "first fused on the driver, the second by a worker; start-up (spawning the workers) timed apart."
         "",
         "| runs on | fusion | run s | frames/s | × 1 worker one pass | main process CPU ms/frame | load | "
         "same CSV as 1 worker |",
@@ -352,8 +346,9 @@ def section(m: dict, chunk_over_s: float, efficiency: float) -> list[str]:
         "",
         "### Agreement of the split with the one pass",
         "",
-        f"Segments of {AGREEMENT_SEGMENT_S:g} s (7 boundaries here; the default {SEGMENT_S:g} s gives 1, and a "
-        "segment's agreement depends on its lead-in, not its length), fused in place (workers give the same: "
+        f"Segments of {AGREEMENT_SEGMENT_S:g} s ({m['fused']['rows'][OVERLAPS[0]]['segments'] - 1} segment starts "
+        f"here; the default {SEGMENT_S:g} s gives 1, and a segment's agreement depends on its lead-in, not its "
+        "length), fused in place (workers give the same: "
         "tests/tracking/test_split.py), every row against the one pass's: *extra*: shown by the split where the one "
         "pass withholds (must be 0); *missing*: shown by the one pass, withheld by the split; *within 0.5σ*: the "
         "share of rows both show whose offset lies within 0.5 of the one pass's σ on every axis; *last miss*: the "
@@ -379,9 +374,11 @@ def section(m: dict, chunk_over_s: float, efficiency: float) -> list[str]:
         f"machine's, from the costs measured on the long scene: detection c = **{1000 * c:.2f} ms** of a core per "
         f"frame (1 worker), plus a chunk's fixed cost ({1000 * chunk_over_s:.3f} ms a frame), divided by the "
         f"efficiency of 2 workers measured above ({efficiency:.2f}); fusion f = **{1000 * f:.2f} ms** per frame "
-        f"(8 cameras, one pass, on the measurements alone); the driver's own d = **{1000 * d:.2f} ms** per frame "
-        f"(the main process's CPU with 2 workers, one pass, less f: receiving and merging the chunks, the CSV; plus "
-        f"{m['pickling_ms']:.3f} ms sending the segments and taking their estimates back). One pass: the larger of "
+        f"(8 cameras, one pass, on the measurements alone); the driver's own CPU per frame, measured by replaying "
+        "the 1-worker run's chunk results (pickled as a worker sends them) through it: one pass, receiving and "
+        f"merging the chunks and writing the CSV, **{1000 * d_one:.2f} ms** (its fusion taken off); split, "
+        f"besides, cutting and sending the segments and taking their estimates back, **{1000 * d:.2f} ms** "
+        f"(segments of {DRIVER_SEGMENT_S:g} s, the fusion of segment 0 taken off). One pass: the larger of "
         "the tracking over the cores and the driver's f + d on one. Split: the larger of tracking and fusion "
         f"(with its {100 * LEAD_IN_S / SEGMENT_S:.0f} % lead-in) over the cores and the driver's d plus its segment "
         "0, then the last segment's fusion after the last frame. Assumed as in the projection above: storage and "
@@ -390,7 +387,7 @@ def section(m: dict, chunk_over_s: float, efficiency: float) -> list[str]:
         "| nodes × 16 cores | fusion ms/frame before / after (item 2) | one pass | bound by | split | bound by |",
         "|---:|---|---:|---|---:|---|",
     ]
-    for nodes, cores, one, one_bound, split, split_bound in project(c, f, d, chunk_over_s, efficiency):
+    for nodes, cores, one, one_bound, split, split_bound in project(c, f, d_one, d, chunk_over_s, efficiency):
         lines.append(f"| {nodes} ({cores} cores) | {1000 * f:.2f} / _ | {hours(one)} | {one_bound} | "
                      f"**{hours(split)}** | {split_bound} |")
     lines += [

@@ -89,6 +89,37 @@ class SegmentResult:
     cpu_seconds: float = 0.0
     worker: str = ""
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled with its estimates as columns (without the cameras' poses): a third of the driver's time to take
+        them back as objects, four a frame (benchmarks/results/scale.md)."""
+        return {**self.__dict__, "estimates": pack(self.estimates)}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state, estimates=unpack(state["estimates"]))
+
+
+def pack(estimates: list[ConeEstimate]) -> Any:
+    """Estimates as columns: times, names and reasons by index, offsets and covariances stacked (NaN: none); as they
+    are when they hold the cameras' poses."""
+    if any(e.T_jacket_cameras is not None for e in estimates):
+        return estimates
+    names: dict[Any, int] = {}
+    index = np.array([[names.setdefault(v, len(names)) for v in (e.cone, e.cameras, e.withheld)] for e in estimates],
+                     dtype=np.int32).reshape(-1, 3)
+    covariance = np.array([np.full((3, 3), np.nan) if e.covariance is None else e.covariance for e in estimates])
+    return (np.array([e.time for e in estimates]), list(names), index, np.array([e.offset for e in estimates]),
+            covariance.reshape(-1, 3, 3))
+
+
+def unpack(packed: Any) -> list[ConeEstimate]:
+    """The estimates of pack's columns."""
+    if isinstance(packed, list):
+        return packed
+    times, names, index, offsets, covariance = packed
+    known = ~np.isnan(covariance[:, 0, 0])
+    return [ConeEstimate(t, names[i], offsets[k], names[c], covariance[k] if known[k] else None, None, names[w])
+            for k, (t, (i, c, w)) in enumerate(zip(times.tolist(), index.tolist(), strict=True))]
+
 
 @dataclass
 class SplitInfo:

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 from collections import Counter
 from pathlib import Path
@@ -71,11 +72,16 @@ def test_segments_fused_by_workers_are_fused_in_place(run: tuple[Rig, list]) -> 
     pool = LocalPool(2)
     try:
         info = SplitInfo()
-        by_workers = list(split_estimates(rig, obs, "fused", pool, SEGMENT_S, LEAD_IN_S, info=info))
+        by_workers = [list(split_estimates(rig, obs, "fused", pool, SEGMENT_S, LEAD_IN_S, poses=poses, info=info))
+                      for poses in (True, False)]  # without the cameras' poses the estimates travel as columns
     finally:
         pool.close()
-    assert len({r.worker for r in info.results}) >= 1 and all(r.worker for r in info.results)
-    assert canon(by_workers) == canon(list(split_estimates(rig, obs, "fused", InPlace(), SEGMENT_S, LEAD_IN_S)))
+    assert len(info.results) == 6 and all(r.worker for r in info.results)
+    in_place = list(split_estimates(rig, obs, "fused", InPlace(), SEGMENT_S, LEAD_IN_S))
+    assert canon(by_workers[0]) == canon(in_place) and all(e.T_jacket_cameras for e in in_place)
+    assert any(e.T_jacket_cameras is None for e in by_workers[1])
+    assert canon([dataclasses.replace(e, T_jacket_cameras=None) for e in by_workers[1]]) == \
+        canon([dataclasses.replace(e, T_jacket_cameras=None) for e in in_place])
 
 
 def test_track_splits_a_long_run_and_one_pass_fusion_keeps_one_pass(clip: Path, tmp_path: Path) -> None:  # noqa: F811
