@@ -77,7 +77,8 @@ def track_once(rig_path: Path, run, csv: Path) -> dict:
     sched: list = []
     before = load()
     t0, c0 = time.perf_counter(), time.process_time()
-    source = track_rig(rig, stats=stats) if run is None else track_chunks(rig, run, stats=stats, scheduler=sched)
+    source = track_rig(rig, stats=stats) if run is None else \
+        track_chunks(rig, run, stats=stats, scheduler=sched, lean=True)  # a CSV alone: lean, as `track` does
 
     def measurements():
         for r in source:
