@@ -9,7 +9,11 @@ CHUNK_FRAMES) and fuses them on this process (the fused mode, offsets to a CSV),
 of every run is compared with the one-worker run's. Load average (`uptime`) is recorded before and after every timed
 run: the machine is shared, and a load above its cores makes every number here slower and the speed-ups smaller.
 
-Run: .venv/bin/python -m benchmarks.scale [--seconds 40] [--repeats 3]
+Then the fusion split over time (benchmarks/scale_split.py): a long eight-camera installation tracked with 1 and 2
+workers, fused in one pass and split; the split's agreement with the one pass per lead-in; the driver's own cost per
+frame; and the projection of one six-hour, eight-camera installation on 1, 8 and 64 nodes.
+
+Run: .venv/bin/python -m benchmarks.scale [--seconds 40] [--repeats 3] [--long-seconds 480 | --no-long]
 Results: benchmarks/results/scale.md
 """
 
@@ -28,6 +32,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks import scale_split
 from benchmarks.report import write_results
 from benchmarks.scenes import render_scene
 from tracking.detection import DEFAULT_REFINEMENT
@@ -72,7 +77,8 @@ def track_once(rig_path: Path, run, csv: Path) -> dict:
     sched: list = []
     before = load()
     t0, c0 = time.perf_counter(), time.process_time()
-    source = track_rig(rig, stats=stats) if run is None else track_chunks(rig, run, stats=stats, scheduler=sched)
+    source = track_rig(rig, stats=stats) if run is None else \
+        track_chunks(rig, run, stats=stats, scheduler=sched, lean=True)  # a CSV alone: lean, as `track` does
 
     def measurements():
         for r in source:
@@ -281,7 +287,7 @@ def project(c_worker: float, f_main: float, overhead: float, chunk_fixed: float,
     frames = HOURS * 3600 * FPS * CAMERAS
     per_frame = c_worker * (1 + (overhead + chunk_fixed) / (chunk * c_worker)) / efficiency  # core-seconds per frame
     out = []
-    for what, installs in (("one installation", 1), (f"{INSTALLATIONS} installations", INSTALLATIONS)):
+    for what, installs in (("one installation, one pass", 1), (f"{INSTALLATIONS} installations", INSTALLATIONS)):
         for nodes in NODES:
             cores = nodes * CORES_PER_NODE
             drivers = min(installs, math.ceil(cores * f_main / (per_frame + f_main)))  # the drivers' share of the cores
@@ -308,6 +314,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=40.0)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--long-seconds", type=float, default=scale_split.LONG_SECONDS)
+    parser.add_argument("--no-long", action="store_true", help="Leave out the long installation (the split).")
     args = parser.parse_args()
     scene = render_scene(SCENARIO, SIZE, args.seconds, FPS)
     rig_path = scene / "rig.yaml"
@@ -325,6 +333,10 @@ def main() -> None:
     overhead = ray_overhead(rig_path)
     fixed = chunk_fixed_cost(rig_path)
     top = profile_top(rig_path)
+    long = None
+    if not args.no_long:
+        with tempfile.TemporaryDirectory() as tmp:
+            long = scale_split.measure(Path(tmp), args.long_seconds)
     end_load = load()
 
     one, two, ray_cfg, _ = (c["best"] for c in configs)
@@ -463,11 +475,14 @@ def main() -> None:
     single = HOURS * 3600 * FPS * CAMERAS * f_main
     lines += [
         "",
-        f"One installation cannot take less than its fusion, {hours(single)} ({1 / f_main:.0f} frames/s on one "
-        "core), however many cores track its chunks: the filter applies every measurement in capture-time order. "
-        "A faster single installation needs a cheaper filter step (or fewer measurements fused), not more nodes; "
-        "a campaign of many installations scales with the nodes.",
+        f"Fused in one pass (`--one-pass-fusion`, and every run before the split), one installation cannot take "
+        f"less than its fusion, {hours(single)} ({1 / f_main:.0f} frames/s on one core), however many cores track "
+        "its chunks: the filter applies every measurement in capture-time order. The split over time (below) "
+        "fuses its segments on the workers too; a campaign of many installations scales with the nodes (several "
+        "`batch --ray ADDRESS` commands against one cluster give the D drivers of this model).",
     ]
+    if long is not None:
+        lines += ["", *scale_split.section(long, (overhead["per_task"] + fixed) / CHUNK_FRAMES, speedup2 / 2)]
     write_results("scale", lines, echo=True)
 
 

@@ -86,6 +86,7 @@ class ChunkTask:
     packets: bool = False  # keep each frame's H.264 packet (a recording or an archive is written)
     keep_gray: bool = False  # send the pixels back (a recording of a source without H.264)
     roi_tracking: bool = False
+    lean: bool = False  # send back each frame without its detections and poses (FrameResult.lean: no sink shows them)
     threads: str = "SLICE"  # the decoder's threading (SLICE: one thread for cameras' H.264): a worker is one core
 
 
@@ -176,8 +177,8 @@ EXIT_ORPHANED = 70  # a worker whose parent died ends with this status (nobody r
 _RIGS: dict[tuple[str, float], Rig] = {}
 
 
-def _rig(path: Path) -> Rig:
-    """A worker's rig, loaded once per process."""
+def worker_rig(path: Path) -> Rig:
+    """A worker's rig, loaded once per process (and again when its file changed)."""
     key = (str(path), Path(path).stat().st_mtime)
     if key not in _RIGS:
         _RIGS[key] = load_rig(path)
@@ -203,7 +204,7 @@ def _run_chunk(task: ChunkTask, t0: float, c0: float) -> ChunkResult:
     chunk = task.chunk
     src: Path | str = ""
     try:  # bad input comes back as data: Ray would wrap the exception in its own, with a traceback in its text
-        rig = _rig(task.rig_path)
+        rig = worker_rig(task.rig_path)
         entry = next(c for c in rig.cameras if c.name == task.chunk.camera)
         tracker = CameraTracker.from_rig(rig, entry, task.refinement, packets=task.packets,
                                          roi_tracking=task.roi_tracking)
@@ -218,8 +219,8 @@ def _run_chunk(task: ChunkTask, t0: float, c0: float) -> ChunkResult:
         for frame in source:
             result = tracker.process(frame)
             keep = task.keep_gray and frame.packet is None
-            out.results[len(log.stamps) - 1] = replace(
-                result, frame=replace(frame, gray=frame.gray if keep else None, bgr=None, video=None))
+            result = replace(result, frame=replace(frame, gray=frame.gray if keep else None, bgr=None, video=None))
+            out.results[len(log.stamps) - 1] = result.lean() if task.lean else result
     except InputError as exc:
         out.error = (exc.source, exc.message, exc.field)
     out.stamps = log.stamps
@@ -251,25 +252,32 @@ def _closing(container: Any, items: Iterator[Any]) -> Iterator[Any]:
 
 
 class Runner(Protocol):
-    """Runs chunk tasks somewhere: submit returns a handle, wait its ChunkResult."""
+    """Runs tasks somewhere: submit a chunk (or call a module-level function on one argument, both picklable) returns
+    a handle, wait its result (a ChunkResult for a chunk)."""
 
     def submit(self, task: ChunkTask) -> Any: ...
 
-    def wait(self, handle: Any) -> ChunkResult: ...
+    def call(self, fn: Callable[[Any], Any], arg: Any) -> Any: ...
+
+    def wait(self, handle: Any) -> Any: ...
 
     workers: int
 
 
 class InPlace:
-    """Runs each chunk in this process when its result is wanted (--workers 1)."""
+    """Runs each task in this process when its result is wanted (--workers 1)."""
 
     workers = 1
 
     def submit(self, task: ChunkTask) -> Any:
-        return task
+        return run_chunk, task
 
-    def wait(self, handle: Any) -> ChunkResult:
-        return run_chunk(handle)
+    def call(self, fn: Callable[[Any], Any], arg: Any) -> Any:
+        return fn, arg
+
+    def wait(self, handle: Any) -> Any:
+        fn, arg = handle
+        return fn(arg)
 
     def close(self) -> None:
         pass
@@ -311,11 +319,14 @@ class LocalPool:
     def submit(self, task: ChunkTask) -> Future:
         return self.pool.submit(run_chunk, task)
 
+    def call(self, fn: Callable[[Any], Any], arg: Any) -> Future:
+        return self.pool.submit(fn, arg)
+
     def warm(self) -> set[str]:
         """Start every worker and import the tracker in it; the workers' host:pid."""
         return set(self.pool.map(ready, range(4 * self.workers), chunksize=1))
 
-    def wait(self, handle: Future) -> ChunkResult:
+    def wait(self, handle: Future) -> Any:
         return handle.result()
 
     def close(self) -> None:
@@ -339,16 +350,22 @@ class RayRunner:
             self.started = True
         self.workers = int(ray.cluster_resources().get("CPU", 1))
         self.remote = ray.remote(num_cpus=1, max_retries=2)(run_chunk)
+        self.remotes: dict[Callable[[Any], Any], Any] = {}
 
     def submit(self, task: ChunkTask) -> Any:
         return self.remote.remote(task)
+
+    def call(self, fn: Callable[[Any], Any], arg: Any) -> Any:
+        if fn not in self.remotes:
+            self.remotes[fn] = self.ray.remote(num_cpus=1, max_retries=2)(fn)
+        return self.remotes[fn].remote(arg)
 
     def warm(self) -> set[str]:
         """Start the Ray workers and import the tracker in them; their host:pid."""
         remote = self.ray.remote(num_cpus=1)(ready)
         return set(self.ray.get([remote.remote(k) for k in range(4 * self.workers)]))
 
-    def wait(self, handle: Any) -> ChunkResult:
+    def wait(self, handle: Any) -> Any:
         return self.ray.get(handle)
 
     def close(self) -> None:
@@ -556,9 +573,11 @@ def plan_rig(rig: Rig, cameras: list[str] | None = None, chunk_frames: int = CHU
 def track_chunks(rig: Rig, run: Runner, refinement: Refinement = DEFAULT_REFINEMENT, packets: bool = False,
                  keep_gray: bool = False, roi_tracking: bool = False, stats: TrackStats | None = None,
                  plans: list[VideoPlan] | None = None, chunk_frames: int = CHUNK_FRAMES,
-                 window: int | None = None, scheduler: list[Scheduler] | None = None) -> Iterator[FrameResult]:
+                 window: int | None = None, scheduler: list[Scheduler] | None = None, lean: bool = False
+                 ) -> Iterator[FrameResult]:
     """All cameras of a rig, tracked chunk by chunk by `run`, merged into one stream ordered by capture time (as
-    pipeline.track_rig gives it). stats: as track_rig's. scheduler: a list that gets the Scheduler (benchmarks)."""
+    pipeline.track_rig gives it). stats: as track_rig's. scheduler: a list that gets the Scheduler (benchmarks).
+    lean: each frame without its detections and poses (FrameResult.lean)."""
     if rig.path is None:
         raise InputError("rig", "has no file (the workers read it)")
     plans = plans if plans is not None else plan_rig(rig, chunk_frames=chunk_frames)
@@ -566,8 +585,8 @@ def track_chunks(rig: Rig, run: Runner, refinement: Refinement = DEFAULT_REFINEM
     healths = {p.camera: replace(p.health) for p in plans}
     if stats is not None:
         stats.videos.update(healths)
-    tasks = [ChunkTask(Path(rig.path).resolve(), c, refinement, packets, keep_gray, roi_tracking)  # any node, any cwd
-             for p in plans for c in p.chunks]
+    tasks = [ChunkTask(Path(rig.path).resolve(), c, refinement, packets, keep_gray, roi_tracking,  # any node, any cwd
+                       lean) for p in plans for c in p.chunks]
     sched = Scheduler(run, tasks, window or max(2 * run.workers, run.workers + len(plans)))
     if scheduler is not None:
         scheduler.append(sched)

@@ -46,11 +46,22 @@ class FrameResult:
     # (the camera's first) frame
     mirrored: tuple[int, ...] = ()  # ids detected that may be mirrored and that nothing confirmed: dropped
     # (tracking.mirror)
+    posed: int | None = None  # len(poses) where the detections and poses were dropped (lean)
 
     @property
     def time(self) -> float:
         """Capture time, s."""
         return self.frame.time
+
+    @property
+    def marker_count(self) -> int:
+        """Rig markers posed in the frame."""
+        return len(self.poses) if self.posed is None else self.posed
+
+    def lean(self) -> FrameResult:
+        """The frame without its detections and marker poses (their count kept): what the offsets CSV and the run's
+        summary need, a third of the size a worker sends back (benchmarks/results/scale.md)."""
+        return replace(self, detections=Detections([]), poses={}, posed=self.marker_count)
 
     @property
     def measurements(self) -> list[PairOffset | BodyObservation]:
@@ -87,7 +98,7 @@ class TrackStats:
     def add(self, r: FrameResult) -> None:
         """Count one frame's results."""
         self.frames[r.camera] += 1
-        self.markers[r.camera] += len(r.poses)
+        self.markers[r.camera] += r.marker_count
         self.pair_offsets[r.camera] += len(r.offsets)
         self.ambiguous[r.camera] += sum(o.choice == Choice.AMBIGUOUS for o in r.offsets)
         self.unknown_ids.update(r.unknown_ids)

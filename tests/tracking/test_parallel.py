@@ -89,16 +89,19 @@ def test_chunked_frames_are_one_pass_frames(clip: Path) -> None:
         pool.close()
 
 
-def rrd_rows(path: Path) -> Counter:
+def rrd_rows(path: Path, frame_timelines: bool = True) -> Counter:
     """Every logged value of a recording, read back with rerun's own reader: (entity, component, times, value) rows
-    (log time and tick, the recording's start time and the software's commit left out)."""
+    (log time and tick, the recording's start time and the software's commit left out; frame_timelines=False: the
+    capture time alone, not the frame numbers current when a value was logged)."""
     import rerun as rr
 
     rows: Counter = Counter()
     for chunk in rr.chunk.RrdReader(path).store().stream().to_chunks():
         batch = chunk.to_record_batch()
         cols = {n: batch.column(i).to_pylist() for i, n in enumerate(batch.schema.names)}
-        times = [n for n in cols if n == "capture_time" or n.startswith("frame_")]
+        times = [n for n in cols if n == "capture_time" or (frame_timelines and n.startswith("frame_"))]
+        if not frame_timelines:
+            cols = {n: v for n, v in cols.items() if not n.startswith("frame_")}
         values = [n for n in cols if n not in times and n not in ("log_time", "log_tick", "RecordingInfo:start_time")
                   and not n.startswith("rerun.")]
         for r in range(batch.num_rows):

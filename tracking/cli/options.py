@@ -75,7 +75,6 @@ RayOption = Annotated[str | None, typer.Option(metavar="[ADDRESS]", help="Run th
                                                "on a Ray started here with --workers CPUs. Needs topside[cluster].")]
 ChunkOption = Annotated[int, typer.Option(min=1, help="A chunk of a video starts at the first keyframe this many "
                                                       "frames after the previous chunk's start.")]
-
 # Options shared by `view` and `live`: the web viewer.
 WEB_PORT_DEFAULT = 9090  # viewer.playback.WEB_PORT
 WebPortOption = Annotated[int, typer.Option(help="Port of the web viewer's page (with --web).", min=1, max=65535)]
@@ -97,3 +96,13 @@ def finite(low: float, low_open: bool = True, high: float = math.inf, allow_inf:
         return value
 
     return check
+
+
+# Options shared by `track` and `batch`: the fusion split over time (tracking.split).
+FUSION_SEGMENT_DEFAULT = 300.0  # tracking.split.SEGMENT_S
+OnePassOption = Annotated[bool, typer.Option("--one-pass-fusion", help="Fuse the whole run in one pass on this "
+                                             "process, in capture-time order (default: a run longer than "
+                                             "--fusion-segment is cut into segments fused by the workers).")]
+FusionSegmentOption = Annotated[float, typer.Option(help="Seconds of capture per segment of the fusion split over "
+                                                         "time (each read from 20 s before its start).",
+                                                    callback=finite(0.0))]

@@ -3,7 +3,9 @@ truth, and the `demo` that simulates, tracks and evaluates one.
 
 `track` and `batch` share one loop (RunLoop): the rig's videos cut into chunks and tracked by worker processes or Ray
 tasks (tracking.parallel), each frame counted, shown on the progress bar and given to the sinks (a Rerun recording,
-an MCAP archive), and the estimator's offsets written to the CSV and given to the sinks.
+an MCAP archive), and the estimator's offsets written to the CSV and given to the sinks; a long run's fusion split
+over time into segments fused by the same workers (tracking.split). `batch` with at least as many installations as
+workers tracks and fuses each whole on one worker, as many at once as there are workers.
 """
 
 from __future__ import annotations
@@ -31,9 +33,12 @@ from tracking.cli.common import (
 )
 from tracking.cli.options import (
     CHUNK_FRAMES_DEFAULT,
+    FUSION_SEGMENT_DEFAULT,
     ChunkOption,
+    FusionSegmentOption,
     KeyOption,
     Mode,
+    OnePassOption,
     OperatorOption,
     RayOption,
     RefineOption,
@@ -50,7 +55,6 @@ from tracking.outputs import Outputs, check_outputs
 
 if TYPE_CHECKING:
     import pandas as pd
-    from rich.progress import TaskID
 
     from tracking.batch import Installation, Outcome
     from tracking.estimate import ConeEstimate
@@ -60,6 +64,7 @@ if TYPE_CHECKING:
     from tracking.parallel import Runner, VideoPlan
     from tracking.pipeline import Sink, TrackStats
     from tracking.rig import Rig
+    from tracking.split import SplitInfo
 
 # tracking.estimator.ESTIMATORS' values: (rig, measurements, report)
 Estimator = Callable[..., Iterable["ConeEstimate"]]
@@ -95,9 +100,9 @@ class RunLoop:
         """The tracked frames' pair offsets and body observations, in capture-time order."""
         from tracking.parallel import track_chunks
 
-        sinks = bool(self.sinks)  # the sinks record the frames' packets and images; the CSV alone needs neither
-        for result in track_chunks(self.rig, self.run, self.refine, packets=sinks, keep_gray=sinks,
-                                   roi_tracking=self.roi, stats=self.stats, plans=self.plans):
+        sinks = bool(self.sinks)  # the sinks record the frames' packets, images, detections and poses; the CSV alone
+        for result in track_chunks(self.rig, self.run, self.refine, packets=sinks, keep_gray=sinks,  # needs none
+                                   roi_tracking=self.roi, stats=self.stats, plans=self.plans, lean=not sinks):
             self.stats.add(result)
             self.advance()
             if self.warn:
@@ -129,6 +134,38 @@ class RunLoop:
                 except Exception:
                     if not failing:
                         raise
+
+
+@dataclass(frozen=True)
+class Fusion:
+    """How a run fuses: in one pass on the command's process, or split over time into segments of segment_s fused by
+    the runner (tracking.split; the modes without a filter always in one pass)."""
+
+    one_pass: bool = False
+    segment_s: float = FUSION_SEGMENT_DEFAULT
+    info: SplitInfo = field(default_factory=lambda: _split_info())  # what the split did, once run
+
+    def estimator(self, mode: str, run: Runner, poses: bool) -> Estimator:
+        """The estimator of `mode` as this fusion runs it: (rig, measurements, report=None) -> estimates.
+        poses: keep the cameras' poses in the estimates (the sinks show them)."""
+        from tracking.estimator import ESTIMATORS
+        from tracking.split import SPLIT_MODES, split_estimates
+
+        if self.one_pass or mode not in SPLIT_MODES:
+            return ESTIMATORS[mode]
+
+        def split(rig: Rig, measurements: Iterable[Measurement], report: FilterReport | None = None
+                  ) -> Iterable[ConeEstimate]:
+            return split_estimates(rig, measurements, mode, run, self.segment_s, poses=poses, report=report,
+                                   info=self.info)
+
+        return split
+
+
+def _split_info() -> SplitInfo:
+    from tracking.split import SplitInfo
+
+    return SplitInfo()
 
 
 def recorder(rig: Rig, path: Path, truth_df: pd.DataFrame | None, options: dict[str, str],
@@ -166,12 +203,15 @@ def track(
     ray: RayOption = None,
     chunk_frames: ChunkOption = CHUNK_FRAMES_DEFAULT,
     roi: RoiOption = False,
+    one_pass_fusion: OnePassOption = False,
+    fusion_segment: FusionSegmentOption = FUSION_SEGMENT_DEFAULT,
 ) -> None:
     """Track the rig's videos and write the offset at each cone per timestamp (CSV), optionally a recording.
 
     Each camera's video is cut into chunks at keyframes, tracked in worker processes (--workers) or Ray tasks
-    (--ray) and fused here in capture-time order: the output is the same whatever runs the chunks."""
-    from tracking.estimator import ESTIMATORS, FilterReport
+    (--ray) and fused in capture-time order, a run longer than --fusion-segment in segments over time by the same
+    workers (--one-pass-fusion: in one pass here). The output is the same whatever runs the chunks and segments."""
+    from tracking.estimator import FilterReport
     from tracking.evaluate import read_truth
     from tracking.parallel import runner
     from tracking.pipeline import TrackStats
@@ -182,8 +222,7 @@ def track(
     truth_df = read_truth(truth) if truth else None
     archive = ArchiveSettings.for_track(mcap, key, vessel, operator, video)  # before any work
     options = {"mode": mode.value, "refine": refine.value, **({"roi": "on"} if roi else {})}
-    report = FilterReport()
-    outputs = Outputs(keep_on_interrupt=True)
+    report, fusion, outputs = FilterReport(), Fusion(one_pass_fusion, fusion_segment), Outputs(keep_on_interrupt=True)
     loop = RunLoop(the_rig, runner(workers, ray), refine, [], TrackStats(), roi=roi, warn=True)
     try:
         with outputs, progress_bar() as progress:
@@ -193,14 +232,14 @@ def track(
                 loop.sinks.append(recorder(the_rig, outputs.claim(rrd), truth_df, options, show_rejected=rejected))
             if archive is not None:
                 loop.sinks.append(archive_sink(the_rig, outputs.claim(mcap), options, truth_df, archive, csv))
-            loop.write(csv, ESTIMATORS[mode], report)
+            loop.write(csv, fusion.estimator(mode.value, loop.run, poses=bool(loop.sinks)), report)
     except KeyboardInterrupt:
         kept = ", ".join(map(str, outputs.kept)) or "nothing"
         err_console.print(f"stopped after {loop.rows} rows; what was written is kept in {kept}", markup=False)
         raise typer.Exit(EXIT_INTERRUPTED) from None
     finally:
         loop.run.close()
-    _print_track_summary(the_rig, rig, mode, loop.stats)
+    _print_track_summary(the_rig, rig, mode, loop.stats, fusion)
     _print_track_outputs(loop.rows, out, rrd, mcap)
     if mode in (Mode.FUSED, Mode.SMOOTHED):
         _rig_findings(rig, report)
@@ -220,9 +259,11 @@ def _plan(loop: RunLoop, progress: Reporter, chunk_frames: int) -> None:
     loop.advance = lambda: progress.advance(task)
 
 
-def _print_track_summary(rig: Rig, rig_path: Path, mode: Mode, stats: TrackStats) -> None:
-    """The run's table per camera, and what it ignored."""
+def _print_track_summary(rig: Rig, rig_path: Path, mode: Mode, stats: TrackStats, fusion: Fusion) -> None:
+    """The run's table per camera, how it was fused, and what it ignored."""
     from rich.table import Table
+
+    from tracking.split import LEAD_IN_S
 
     table = Table(title=f"tracked {rig_path} ({mode} mode)")
     for col in ("camera", "frames", "markers", "pair offsets", "ambiguous"):
@@ -232,6 +273,9 @@ def _print_track_summary(rig: Rig, rig_path: Path, mode: Mode, stats: TrackStats
         table.add_row(n, str(stats.frames[n]), str(stats.markers[n]), str(stats.pair_offsets[n]),
                       str(stats.ambiguous[n]))
     console.print(table)
+    if fusion.info.segments > 1:
+        console.print(f"fused in {fusion.info.segments} segments of {fusion.segment_s:g} s over time, each from "
+                      f"{LEAD_IN_S:g} s before its start (--one-pass-fusion: in one pass)")
     if stats.unknown_ids:
         summary = ", ".join(f"id {i}: {n}" for i, n in sorted(stats.unknown_ids.items()))
         console.print(f"markers not in the rig (ignored): {summary}", style="yellow")
@@ -286,10 +330,14 @@ def batch(
     ray: RayOption = None,
     refine: RefineOption = DEFAULT_REFINEMENT,
     chunk_frames: ChunkOption = CHUNK_FRAMES_DEFAULT,
+    one_pass_fusion: OnePassOption = False,
+    fusion_segment: FusionSegmentOption = FUSION_SEGMENT_DEFAULT,
 ) -> None:
     """Re-analyse many installations: each one's offsets.csv (run.rrd with rrd: true, accuracy.md with a truth) in
     its out folder, one progress bar over all, then a table: frames, video and wall time, accuracy, failures.
 
+    With at least as many installations as workers, each is tracked and fused whole by one worker, as many at once as
+    there are workers; with fewer, one after another, each over every worker. The outputs are the same either way.
     One that fails does not stop the others. Exit status: 0 when all succeeded, 1 when any failed, 2 for a bad
     manifest."""
     import time
@@ -299,22 +347,69 @@ def batch(
 
     installations = load_manifest(manifest)
     run = runner(workers, ray)
+    fusion = Fusion(one_pass_fusion, fusion_segment)
+    at_once = 1 < run.workers <= len(installations)
     outcomes: list[Outcome] = []
     started = time.perf_counter()
     try:
         with progress_bar() as progress:
             task = progress.add_task(f"finding the keyframes of {len(installations)} installations", total=None)
             prepared = [_prepare(inst, chunk_frames) for inst in installations]  # every rig and keyframe, first
-            progress.update(task, description=f"{len(installations)} installations on {run.workers} workers",
+            how = "at once" if at_once else "one after another"
+            progress.update(task, description=f"{len(installations)} installations on {run.workers} workers ({how})",
                             total=sum(p.frames for one in prepared for p in one.plans) or None, unit="frames")
-            for one in prepared:
+
+            def advance(frames: int = 1) -> None:
+                progress.advance(task, frames)
+
+            if at_once:
+                outcomes = _batch_at_once(prepared, run, refine, fusion, advance)
+            for one in prepared if not at_once else ():
                 progress.update(task, description=f"{one.inst.label} ({len(outcomes) + 1}/{len(installations)})")
-                outcomes.append(_batch_one(one, run, refine, progress, task))
+                outcomes.append(_batch_one(one, run, refine, fusion, advance))
     finally:
         run.close()
-    _print_batch(manifest, outcomes, time.perf_counter() - started)
+    _print_batch(manifest, outcomes, time.perf_counter() - started,
+                 f"{min(run.workers, len(prepared))} at once, each on one worker" if at_once else
+                 f"one after another, each on {run.workers} worker{'s' if run.workers > 1 else ''}")
     if not all(o.ok for o in outcomes):
         raise typer.Exit(1)
+
+
+@dataclass(frozen=True)
+class InstallationTask:
+    """One installation of a batch for one worker to track and fuse whole (picklable: by value, paths every node
+    sees)."""
+
+    one: Prepared
+    refine: Refinement
+    fusion: Fusion
+
+
+def installation_task(task: InstallationTask) -> Outcome:
+    """A worker's installation: tracked in place (its chunks one after another, its segments too), its outputs
+    written, its Outcome returned."""
+    from tracking.parallel import InPlace
+
+    return _batch_one(task.one, InPlace(), task.refine, task.fusion, lambda frames=1: None)
+
+
+def _batch_at_once(prepared: list[Prepared], run: Runner, refine: Refinement, fusion: Fusion,
+                   advance: Callable[..., None]) -> list[Outcome]:
+    """Every installation as one task of the runner, their Outcomes in the manifest's order (a worker that died names
+    its installation's failure in one line)."""
+    from tracking.batch import Outcome
+
+    handles = [run.call(installation_task, InstallationTask(one, refine, fusion)) for one in prepared]
+    outcomes = []
+    for one, handle in zip(prepared, handles, strict=True):
+        try:
+            outcome = run.wait(handle)
+        except Exception as exc:  # the worker itself failed (killed, out of memory): this installation only
+            outcome = Outcome(one.inst.label, error=one_line(f"{type(exc).__name__}: {exc}"))
+        advance(sum(p.frames for p in one.plans))
+        outcomes.append(outcome)
+    return outcomes
 
 
 def _prepare(inst: Installation, chunk_frames: int) -> Prepared:
@@ -329,7 +424,8 @@ def _prepare(inst: Installation, chunk_frames: int) -> Prepared:
         return Prepared(inst, None, [], one_line(exc))
 
 
-def _batch_one(one: Prepared, run: Runner, refine: Refinement, progress: Reporter, task: TaskID) -> Outcome:
+def _batch_one(one: Prepared, run: Runner, refine: Refinement, fusion: Fusion, advance: Callable[..., None]
+               ) -> Outcome:
     """One installation of a batch: its outputs, or its one-line failure (the frames it did not track are counted
     off the progress bar)."""
     import time
@@ -340,11 +436,11 @@ def _batch_one(one: Prepared, run: Runner, refine: Refinement, progress: Reporte
     inst = one.inst
     outcome = Outcome(inst.label, error=one.error)
     fresh = not inst.out.exists()  # a folder made here and left empty by a failure is removed
-    loop = RunLoop(one.rig, run, refine, one.plans, TrackStats(), advance=lambda: progress.advance(task))
+    loop = RunLoop(one.rig, run, refine, one.plans, TrackStats(), advance=advance)
     t0 = time.perf_counter()
     try:
         if not one.error:
-            _track_installation(inst, loop, outcome)
+            _track_installation(inst, loop, outcome, fusion)
     except InputError as exc:
         outcome.error = one_line(exc)
     except Exception as exc:  # not bad input: a bug or the environment; named in one line, the others go on
@@ -354,16 +450,15 @@ def _batch_one(one: Prepared, run: Runner, refine: Refinement, progress: Reporte
         outcome.video_s = max(((v.last_s or 0.0) - (v.first_s or 0.0) for v in loop.stats.videos.values()),
                               default=0.0)
         outcome.wall_s = time.perf_counter() - t0
-        progress.advance(task, max(sum(p.frames for p in one.plans) - outcome.frames, 0))
+        advance(max(sum(p.frames for p in one.plans) - outcome.frames, 0))
         if outcome.error and fresh and inst.out.is_dir() and not any(inst.out.iterdir()):
             inst.out.rmdir()
     return outcome
 
 
-def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome) -> None:
+def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome, fusion: Fusion) -> None:
     """One installation's offsets.csv (and run.rrd), then, with a truth, its accuracy.md and errors in outcome."""
     from tracking.batch import ACCURACY_NAME, OFFSETS_NAME, RRD_NAME
-    from tracking.estimator import ESTIMATORS
     from tracking.evaluate import evaluate_runs, evaluation_markdown, read_offsets, read_truth
     from tracking.outputs import write_text
 
@@ -375,7 +470,7 @@ def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome) -> 
         if rrd is not None:
             loop.sinks.append(recorder(loop.rig, outputs.claim(rrd), truth_df,
                                        {"mode": inst.mode, "refine": loop.refine.value}))
-        loop.write(outputs.claim(csv), ESTIMATORS[inst.mode])
+        loop.write(outputs.claim(csv), fusion.estimator(inst.mode, loop.run, poses=bool(loop.sinks)))
     outcome.rows = loop.rows
     if truth_df is not None and accuracy is not None:
         ev = evaluate_runs(inst.label, [(read_offsets(csv), truth_df)])
@@ -385,8 +480,8 @@ def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome) -> 
         write_text(accuracy, evaluation_markdown(ev))
 
 
-def _print_batch(manifest: Path, outcomes: list[Outcome], seconds: float) -> None:
-    """The batch's table, one row per installation, and a line per failure on stderr."""
+def _print_batch(manifest: Path, outcomes: list[Outcome], seconds: float, how: str) -> None:
+    """The batch's table, one row per installation, how they ran, and a line per failure on stderr."""
     from rich import box
     from rich.table import Table
 
@@ -401,6 +496,7 @@ def _print_batch(manifest: Path, outcomes: list[Outcome], seconds: float) -> Non
                       f"{o.frames / o.wall_s:.0f}" if o.wall_s > 0 and o.frames else "—", mae,
                       f"{o.max_mm:.0f}" if o.max_mm is not None else "—", "ok" if o.ok else "FAILED")
     console.print(table)
+    console.print(f"installations tracked {how}")
     for o in outcomes:
         if not o.ok:
             err_console.print(f"topside: {o.name} failed: {o.error}", markup=False)
