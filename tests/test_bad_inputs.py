@@ -22,6 +22,7 @@ import pytest
 import yaml
 
 from tests.conftest import FPS, FRAMES, T0, motion
+from tests.streams import mpegts_copy, serving
 from tracking.cli.common import PROGRESS_INTERVAL_ENV
 from tracking.parallel import RAY_CONNECT_TIMEOUT_ENV
 
@@ -654,33 +655,10 @@ def test_marker_sheets_as_pdf_pages_of_print_size(installation: Path, tmp_path: 
 def test_detect_reads_a_stream_url(installation: Path, tmp_path: Path) -> None:
     """detect http://…/cam.ts --frames 3: a camera tried before the rig exists, through a stream URL (an MPEG-TS copy
     of cam-ahead's video served over HTTP here): its markers every frame, on the wall clock, then it stops."""
-    import http.server
-    import threading
-
-    import av
-
-    with av.open(str(installation / "cam-ahead.mp4")) as src, av.open(str(tmp_path / "cam.ts"), "w",
-                                                                       format="mpegts") as dst:
-        out = dst.add_stream_from_template(src.streams.video[0])
-        for packet in src.demux(src.streams.video[0]):
-            if packet.dts is not None:
-                packet.stream = out
-                dst.mux(packet)
-
-    class Quiet(http.server.SimpleHTTPRequestHandler):
-        def __init__(self, *args: object, **kwargs: object) -> None:
-            super().__init__(*args, directory=str(tmp_path), **kwargs)  # type: ignore[arg-type]
-
-        def log_message(self, *args: object) -> None:
-            pass
-
-    with http.server.ThreadingHTTPServer(("127.0.0.1", 0), Quiet) as server:
-        threading.Thread(target=server.serve_forever, daemon=True).start()
-        url = f"http://127.0.0.1:{server.server_address[1]}/cam.ts"
+    with serving(mpegts_copy(installation / "cam-ahead.mp4", tmp_path / "cam.ts").parent) as url:
         started = time.time()
-        proc = subprocess.run([*TOPSIDE, "detect", url, "--frames", "3", "--json"], capture_output=True, text=True,
-                              timeout=120)
-        server.shutdown()
+        proc = subprocess.run([*TOPSIDE, "detect", f"{url}/cam.ts", "--frames", "3", "--json"], capture_output=True,
+                              text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     frames = [json.loads(line) for line in proc.stdout.splitlines()]
     assert [f["frame"] for f in frames] == [0, 1, 2]

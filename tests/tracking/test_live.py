@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import FRAMES
+from tests.streams import mpegts_copy, serving
 from tracking.estimator import fused_estimates
 from tracking.images import Frame
 from tracking.live import LiveTracker
@@ -128,35 +129,17 @@ def test_raw_frames_are_encoded_to_decodable_h264() -> None:
 @pytest.fixture
 def http_streams(installation: Path, tmp_path: Path):
     """The installation's videos as MPEG-TS streams on a local HTTP server, and a rig that reads them."""
-    import functools
-    import http.server
-    import threading
-
-    import av
     import yaml
 
     for name in ("cam-ahead", "cam-port"):
-        with av.open(str(installation / f"{name}.mp4")) as src, av.open(str(tmp_path / f"{name}.ts"), "w",
-                                                                         format="mpegts") as dst:
-            out = dst.add_stream_from_template(src.streams.video[0])
-            for packet in src.demux(src.streams.video[0]):
-                if packet.dts is not None:
-                    packet.stream = out
-                    dst.mux(packet)
-    class Quiet(http.server.SimpleHTTPRequestHandler):
-        def log_message(self, *args: object) -> None:
-            pass
-
-    handler = functools.partial(Quiet, directory=str(tmp_path))
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
-    threading.Thread(target=server.serve_forever, daemon=True).start()
-    rig = yaml.safe_load((installation / "rig.yaml").read_text())
-    for cam in rig["cameras"]:
-        cam["source"] = f"http://127.0.0.1:{server.server_port}/{cam['name']}.ts"
-        cam["calibration"] = str(installation / cam["calibration"])
-    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(rig))
-    yield tmp_path / "rig.yaml"
-    server.shutdown()
+        mpegts_copy(installation / f"{name}.mp4", tmp_path / f"{name}.ts")
+    with serving(tmp_path) as url:
+        rig = yaml.safe_load((installation / "rig.yaml").read_text())
+        for cam in rig["cameras"]:
+            cam["source"] = f"{url}/{cam['name']}.ts"
+            cam["calibration"] = str(installation / cam["calibration"])
+        (tmp_path / "rig.yaml").write_text(yaml.safe_dump(rig))
+        yield tmp_path / "rig.yaml"
 
 
 def test_a_stream_that_ends_is_lost_then_taken_back(http_streams: Path) -> None:

@@ -108,11 +108,6 @@ def block_noises(dt: float, psds: np.ndarray) -> np.ndarray:
     return Q
 
 
-def block_noise(dt: float, psds: list[float]) -> np.ndarray:
-    """(12, 12) white-noise-acceleration process noise of one body, psds (6,) per pose axis."""
-    return block_noises(dt, np.asarray(psds))[0]
-
-
 def topside_psds(tuning: FilterTuning) -> list[float]:
     """(6,) the topside's acceleration psds per pose axis (translation first)."""
     return [tuning.accel_psd] * 3 + [tuning.angular_accel_psd] * 3
@@ -123,17 +118,6 @@ def camera_psds(tuning: FilterTuning, mount: str, scale: float = 1.0) -> list[fl
     mount's motion the camera shows (1: all of it)."""
     m = tuning.motion(mount)
     return [scale * m.angular_accel_psd] * 3 + [scale * m.accel_psd] * 3
-
-
-def process_noise(dt: float, tuning: FilterTuning) -> np.ndarray:
-    """(12, 12) white-noise-acceleration process noise of the topside over dt seconds."""
-    return block_noise(dt, topside_psds(tuning))
-
-
-def camera_process_noise(dt: float, tuning: FilterTuning, mount: str, scale: float = 1.0) -> np.ndarray:
-    """(12, 12) process noise of one camera on a mount over dt seconds (rotation first, then position),
-    scaled by the share of the mount's motion the camera shows (1: all of it)."""
-    return block_noise(dt, camera_psds(tuning, mount, scale))
 
 
 def prior_covariance(tuning: FilterTuning) -> np.ndarray:

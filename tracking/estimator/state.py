@@ -262,25 +262,15 @@ class FilterState:
         S = (H @ PHt if columns is None else H @ PHt[columns]) + R
         try:
             L = np.linalg.cholesky(S)
+            Wt, _ = dtrtrs(L, PHt.T, lower=1)  # (M, n): LAPACK's triangular solves, without numpy's per-call checks
+            K = dtrtrs(L, Wt, lower=1, trans=1)[0].T  # (n, M): P Hᵀ S⁻¹
+            P = self.P - Wt.T @ Wt
         except np.linalg.LinAlgError:  # S not positive definite (P lost it to rounding): symmetrised instead
-            self._apply_general(PHt, S, y)
-            return
-        Wt, _ = dtrtrs(L, PHt.T, lower=1)  # (M, n): LAPACK's triangular solves, without numpy's per-call checks
-        K = dtrtrs(L, Wt, lower=1, trans=1)[0].T  # (n, M): P Hᵀ S⁻¹
-        W = Wt.T
+            K = np.linalg.solve(S, PHt.T).T
+            P = self.P - K @ PHt.T
+            P = (P + P.T) / 2
         c = self.consider.indices  # consider states are not estimated (Schmidt): the others' update, their covariance
         K[c] = 0.0  # and cross-covariance are as with them, their own is kept
-        kept = self.P[c, c]
-        self.P = self.P - W @ W.T
-        self.P[c, c] = kept
-        self.x = self.x + K @ y
-
-    def _apply_general(self, PHt: np.ndarray, S: np.ndarray, y: np.ndarray) -> None:
-        """The update of apply with any invertible S (M, M), made symmetric after."""
-        K = np.linalg.solve(S, PHt.T).T
-        P = self.P - K @ PHt.T
-        c = self.consider.indices
-        K[c] = 0.0
         P[c, c] = self.P[c, c]
         self.x = self.x + K @ y
-        self.P = (P + P.T) / 2
+        self.P = P
