@@ -45,6 +45,9 @@ CLIP_S = 20.0
 RECORDING_MIN = 10.0
 SEGMENT_S = 60.0
 OPEN_AFTER_S = 4.0  # the tablet's page is opened this long into the live session
+LATE_OPENS_S = (5.0, 60.0, 180.0)  # --late: the page opened this long into a looped live session ...
+FOLLOW_S = 120.0  # ... and its lag sampled every SAMPLE_S for this long after
+SAMPLE_S = 10.0
 TIMEOUT_S = 120.0
 TARGET_LIVE_S = 5.0
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]
@@ -182,6 +185,84 @@ def live_runs(scene: Path, repeats: int, screenshots: Path | None) -> list[Timin
     return out
 
 
+@dataclass
+class LateOpen:
+    """A page opened late into a live session: its first figure, the past it was sent, its lag sampled after."""
+
+    case: str
+    figure: float  # s from opening to the first figure (NaN: never)
+    history: float  # s of capture time the page held at its first figure (timeline end minus start)
+    lags: list[tuple[float, float]]  # (s after opening, live clock minus the newest capture time shown)
+    server_mb: float  # what the web server keeps for late pages (live's --server-memory-limit), MB
+    cut: str = ""  # the session's line when it cut the viewer loose, if it did
+
+
+def follow_lag(page, live_start: float, until: float) -> list[tuple[float, float]]:
+    """The page's lag behind the live clock every SAMPLE_S until `until` (monotonic)."""
+    out = []
+    while (now := time.monotonic()) < until:
+        end = page.state().timelines.get("capture_time", (None, None))[1]
+        out.append((now - page.opened, now - live_start - end / 1e9 if end is not None else math.nan))
+        time.sleep(max(0.0, SAMPLE_S - (time.monotonic() - now)))
+    return out
+
+
+def late_runs(scene: Path, opens: list[float], scopes: list[str]) -> list[LateOpen]:
+    """The page opened at each of `opens` s into a live session of the scene looped, per scope; its lag followed."""
+    from tracking.rig import load_rig
+    from tracking.sources import byte_rate
+    from viewer.playback import late_join_bytes
+
+    rig = load_rig(scene / "rig.yaml")
+    rates = [byte_rate(rig, c) for c in rig.cameras]
+    cones = cones_of(scene / "rig.yaml")
+    out = []
+    for scope in scopes:
+        for open_s in opens:
+            work = CACHE / "web-first-figure" / f"late-{scope}-{open_s:g}-{os.getpid()}"
+            cmd = [*TOPSIDE, "live", "--rig", str(scene / "rig.yaml"), "--web", "--speed", "1", "--loop",
+                   "--web-port", str(free_port()), "--grpc-port", str(free_port()), "--viewer-scope", scope,
+                   "--rrd", str(work / "live.rrd"), "--segment-minutes", "1"]
+            case = f"{scope}, opened {open_s:g} s in"
+            with serving(cmd, "web viewer: ") as served:
+                while (start := served.printed(suffix=": live")) is None:
+                    time.sleep(0.05)
+                time.sleep(max(0.0, start + open_s - time.monotonic()))
+                with web_viewer(served.url, TABLET) as page:
+                    try:
+                        figure, _, _ = page.wait_for_rings(len(cones), TIMEOUT_S)
+                        span = page.state().timelines.get("capture_time", (None, None))
+                        history = (span[1] - span[0]) / 1e9 if None not in span else math.nan
+                    except TimeoutError:
+                        figure, history = math.nan, math.nan
+                    lags = follow_lag(page, start, page.opened + FOLLOW_S)
+                cut = next((line.strip() for _, line in served.lines if "cut loose" in line), "")
+            run = LateOpen(case, figure, history, lags, late_join_bytes(rates, scope) / 1e6, cut)
+            print(run, flush=True)
+            out.append(run)
+            remove_tree(work)
+    return out
+
+
+def late_lines(runs: list[LateOpen]) -> list[str]:
+    """The late-open table: first figure, past sent, lag at 30 s and the worst after it."""
+    lines = ["## Pages opened late", "",
+             "`--late`: `topside live --web --speed 1 --loop` on the scene, the page opened N s in and its lag "
+             f"(the live clock minus the newest capture time it holds) sampled every {SAMPLE_S:g} s "
+             f"for {FOLLOW_S:g} s. Past "
+             "sent: the capture time the page held at its first figure (what the server kept for it, "
+             "viewer.playback.late_join_bytes). Target: first figure ≤ 10 s, lag ≤ 5 s within 30 s and after.", "",
+             "| case | server keeps | first figure [s] | past sent [s] | lag at 30 s [s] | worst lag after 30 s [s] | "
+             "lags every 10 s [s] |", "|---|---:|---:|---:|---:|---:|---|"]
+    for r in runs:
+        at30 = [lag for t, lag in r.lags if t >= 30.0]
+        worst = max((lag for lag in at30 if math.isfinite(lag)), default=math.nan)
+        lines.append(f"| {r.case} | {r.server_mb:.0f} MB | {fmt(r.figure)} | {fmt(r.history)} "
+                     f"| {fmt(at30[0]) if at30 else '–'} | {fmt(worst)} | {' '.join(fmt(lag) for _, lag in r.lags)} |")
+    cut = [f"- {r.case}: {r.cut}" for r in runs if r.cut]
+    return lines + (["", *cut] if cut else [])
+
+
 def remove_tree(path: Path) -> None:
     """A benchmark's own folder, gone."""
     import shutil
@@ -253,8 +334,19 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--screenshots", type=Path, default=None, help="save the tablet screenshots here")
     parser.add_argument("--skip-recording", action="store_true")
+    parser.add_argument("--late", default="", help="only the late opens: seconds into the session, e.g. 60,180,1800")
+    parser.add_argument("--scopes", default="superintendent,all")
     args = parser.parse_args()
     scene = render_scene(SCENARIO, (920, 600), CLIP_S)
+    if args.late:
+        load = os.getloadavg()
+        runs = late_runs(scene, [float(v) for v in args.late.split(",")], args.scopes.split(","))
+        lines = ["# A page opened late into a live session", "",
+                 f"{SCENARIO}, 4 cameras at 15 FPS, 920×600, looped; headless Chromium at {TABLET['width']}×"
+                 f"{TABLET['height']}, software WebGL, on the same {os.cpu_count()} cores as the tracker; load average "
+                 f"{load[0]:.1f} before, {os.getloadavg()[0]:.1f} after.", "", *late_lines(runs)]
+        write_results("web_late_open", lines, echo=True)
+        return
     load = os.getloadavg()
     live = live_runs(scene, args.repeats, args.screenshots)
     recorded = [] if args.skip_recording else recording_runs(ten_minute_recording(scene), cones_of(scene / "rig.yaml"),

@@ -27,6 +27,8 @@ from tracking.rig import CameraEntry, Rig
 STREAM_PREFIXES = ("rtsp:", "rtsps:", "http:", "https:", "udp:", "tcp:", "srt:")
 STREAM_OPTIONS = {"rtsp_transport": "tcp", "timeout": "5000000"}  # µs: a dead stream raises instead of hanging
 ENCODE_BITRATE = 2_000_000  # bit/s of H.264 made from raw device frames: 0.9 GB per camera-hour
+STREAM_ASSUMED_BITRATE = 8_000_000  # bit/s of a network camera's stream when nothing says: the upper end of what
+# docs/field-guide.md asks of a 920×600 camera (well above 2 Mbit/s; 4.4-4.9 met every target)
 ENCODE_KEYFRAME_S = 2.0  # a recording segment or a late viewer waits at most this for a decodable frame
 FROZEN_AFTER_S = 1.0  # identical frames for this long: the camera is frozen
 FINGERPRINT_STEP = 8  # px between the samples that fingerprint a frame
@@ -215,6 +217,23 @@ def camera_frames(rig: Rig, entry: CameraEntry, pacer: Pacer, loop_until: float 
     if kind == SourceKind.STREAM:
         return stream_frames(entry.source, entry.time_offset)
     return file_frames(rig.resolve(entry.source), rig.clock(entry), pacer, loop_until)
+
+
+def byte_rate(rig: Rig, entry: CameraEntry) -> float:
+    """Bytes per second of a camera's video as the recording and a live viewer get it: a file's size over its
+    duration, a device's encoding (ENCODE_BITRATE), a stream's assumed STREAM_ASSUMED_BITRATE."""
+    kind = source_kind(entry.source)
+    if kind == SourceKind.DEVICE:
+        return ENCODE_BITRATE / 8
+    if kind == SourceKind.STREAM:
+        return STREAM_ASSUMED_BITRATE / 8
+    path = rig.resolve(entry.source)
+    try:
+        with open_video(path) as container:
+            duration = (container.duration or 0) / av.time_base
+    except InputError:
+        duration = 0.0
+    return path.stat().st_size / duration if duration > 0 else STREAM_ASSUMED_BITRATE / 8
 
 
 def first_capture_time(rig: Rig, entry: CameraEntry) -> float | None:

@@ -27,6 +27,12 @@ SPLIT_UNITS = {"ns": 1e-9, "us": 1e-6, "µs": 1e-6, "ms": 1e-3, "s": 1.0}
 GRPC_PORT = 9876
 WEB_PORT = 9090
 VIEWER_MEMORY_LIMIT = "2GB"  # a six-hour session: the viewer drops the oldest data beyond this, the file keeps all
+LATE_JOIN_S = 20.0  # a web page opened late is sent about this much of the past (its server keeps no more; the layout
+# and static data are kept apart and always sent): opening it after six hours costs what opening it after one does
+VIEW_OVERHEAD_BPS = {"superintendent": 10_000, "all": 100_000}  # bytes/s per camera a live viewer's stream carries
+# beyond the camera's video: the figures (superintendent) or the detections, poses and health as recorded (all);
+# measured on 4 cameras at 15 FPS (benchmarks/results/web_first_figure.md: 0.27 and 0.73 MB/s with 0.34 MB/s of video)
+MIN_SERVER_MEMORY_BYTES = 4 << 20  # the web server keeps at least this (the layout's static data, a few keyframes)
 STDIN = "-"  # rerun's data source for its standard input: what a live session feeds (viewer/feed.py)
 # Rerun's analytics pipeline (re_analytics, native/pipeline.rs) starts nothing when CI is set ("Analytics disabled on
 # CI"); FORCE_RERUN_ANALYTICS would override that, so it is dropped. The user's own analytics.json is left alone.
@@ -216,14 +222,22 @@ def viewer_command(recording: Path, web: bool = False, address: str = "127.0.0.1
     return [rerun_binary(), str(recording), "--bind", address, "--port", port]
 
 
-def live_viewer_command(web: bool, address: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT
-                        ) -> list[str]:
+def late_join_bytes(video_bps: list[float], scope: str) -> int:
+    """What a live web server keeps for a page opened late, bytes: LATE_JOIN_S of the viewer's stream, from each
+    camera's video rate (bytes/s, tracking.sources.byte_rate) and the scope's overhead per camera."""
+    rate = sum(video_bps) + VIEW_OVERHEAD_BPS.get(scope, max(VIEW_OVERHEAD_BPS.values())) * len(video_bps)
+    return max(MIN_SERVER_MEMORY_BYTES, int(LATE_JOIN_S * rate))
+
+
+def live_viewer_command(web: bool, address: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT,
+                        server_bytes: int | None = None) -> list[str]:
     """The rerun command line of a viewer that a live session streams to through its standard input ("-": an .rrd
-    stream, viewer/feed.py); its servers listen on the address only."""
+    stream, viewer/feed.py); its servers listen on the address only. server_bytes: what the web server keeps for
+    late pages (late_join_bytes; default VIEWER_MEMORY_LIMIT)."""
     if web:  # newest first: a tablet that connects late draws the present first, then the backlog behind it
+        limit = VIEWER_MEMORY_LIMIT if server_bytes is None else f"{server_bytes}B"
         return [rerun_binary(), "--serve-web", "--bind", address, "--port", str(grpc_port),
-                "--web-viewer-port", str(web_port), "--server-memory-limit", VIEWER_MEMORY_LIMIT, "--newest-first",
-                STDIN]
+                "--web-viewer-port", str(web_port), "--server-memory-limit", limit, "--newest-first", STDIN]
     return [rerun_binary(), "--bind", address, "--port", str(grpc_port), "--memory-limit", VIEWER_MEMORY_LIMIT,
             "--expect-data-soon", STDIN]
 
@@ -380,15 +394,15 @@ def view_recording(recording: Path, start: float | None = None, end: float | Non
         run_viewer(opened, web, address, grpc_port, web_port, work, signals)
 
 
-def start_live_viewer(web: bool, bind: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT
-                      ) -> subprocess.Popen:
+def start_live_viewer(web: bool, bind: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT,
+                      server_bytes: int | None = None) -> subprocess.Popen:
     """Start a viewer that a live session streams to through its stdin (process.stdin, for viewer.feed.ViewerFeed),
-    listening on --bind only."""
+    listening on --bind only; a web server keeps server_bytes for late pages (live_viewer_command)."""
     if not web and not has_display():
         raise InputError("--spawn", "no display for the native viewer (use --web for a browser or tablet)")
     address = resolve_bind(bind)
     warn_if_exposed(address)
-    return subprocess.Popen(live_viewer_command(web, address, grpc_port, web_port), stdin=subprocess.PIPE,
+    return subprocess.Popen(live_viewer_command(web, address, grpc_port, web_port, server_bytes), stdin=subprocess.PIPE,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=rerun_env(),
                             start_new_session=True, preexec_fn=die_with_parent)
 

@@ -105,6 +105,27 @@ def test_source_kinds_and_clocks(installation: Path) -> None:
     assert not uses_wall_clock(load_rig(installation / "rig.yaml"))
 
 
+def test_what_a_late_web_page_is_sent_follows_the_cameras_byte_rates(installation: Path) -> None:
+    import av
+
+    from tracking.sources import ENCODE_BITRATE, STREAM_ASSUMED_BITRATE, byte_rate
+    from viewer.playback import LATE_JOIN_S, MIN_SERVER_MEMORY_BYTES, late_join_bytes, live_viewer_command
+
+    rig = load_rig(installation / "rig.yaml")
+    entry = rig.cameras[0]
+    video = rig.resolve(entry.source)
+    with av.open(str(video)) as container:  # the file's own duration, read apart from byte_rate
+        seconds = float(container.streams.video[0].frames / container.streams.video[0].average_rate)
+    assert byte_rate(rig, entry) == pytest.approx(video.stat().st_size / seconds, rel=0.15)
+    assert byte_rate(rig, entry.model_copy(update={"source": "0"})) == ENCODE_BITRATE / 8
+    assert byte_rate(rig, entry.model_copy(update={"source": "rtsp://10.0.0.5/s"})) == STREAM_ASSUMED_BITRATE / 8
+    four = [STREAM_ASSUMED_BITRATE / 8] * 4  # four network cameras: about LATE_JOIN_S of their video and figures
+    assert LATE_JOIN_S * sum(four) < late_join_bytes(four, "superintendent") < late_join_bytes(four, "all")
+    assert late_join_bytes([1000.0], "superintendent") == MIN_SERVER_MEMORY_BYTES  # the layout's static data
+    cmd = live_viewer_command(web=True, server_bytes=late_join_bytes(four, "all"))
+    assert cmd[cmd.index("--server-memory-limit") + 1] == f"{late_join_bytes(four, 'all')}B"
+
+
 def test_freeze_is_noticed_after_its_limit() -> None:
     detector = FreezeDetector()
     still = np.full((60, 80), 100, np.uint8)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -71,3 +72,47 @@ def test_a_window_of_a_live_recording_opens_with_the_superintendents_layout(inst
     finally:
         view.send_signal(signal.SIGTERM)
         view.communicate(timeout=60)
+
+
+LATE_OPEN_S = 60.0  # issue 37: a tablet opened a minute or more into a set-down showed the installation that far back
+LAG_LIMIT_S = 5.0  # the view's lag behind the live clock, within ...
+LAG_WITHIN_S = 30.0  # ... this long of opening the page
+
+
+@pytest.mark.skipif(chromium() is None, reason="no chromium binary (apt-get install chromium; .ci/run does)")
+def test_a_page_opened_a_minute_into_a_live_session_shows_the_present(installation: Path, tmp_path: Path) -> None:
+    from tests.conftest import T0
+
+    web_port, grpc_port = free_port(), free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "tracking.cli", "live", "--rig", str(installation / "rig.yaml"),
+                             "--rrd", str(tmp_path / "live.rrd"), "--web", "--web-port", str(web_port),
+                             "--grpc-port", str(grpc_port), "--speed", "1", "--loop"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: list[tuple[float, str]] = []  # both outputs read to the end, timed: a full pipe would stop the session
+    readers = [threading.Thread(target=lambda f=f: lines.extend((time.monotonic(), t) for t in f), daemon=True)
+               for f in (proc.stdout, proc.stderr)]
+    for reader in readers:
+        reader.start()
+    try:
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while not any(": live" in t for _, t in lines) and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.05)
+        url = next(t.split("web viewer: ", 1)[1].strip() for _, t in lines if "web viewer: http" in t)
+        assert f"127.0.0.1:{web_port}" in url
+        started = next(at for at, t in lines if ": live" in t)  # the first frame's capture time, T0, on the live clock
+        time.sleep(LATE_OPEN_S)
+        with web_viewer(url) as page:
+            page.wait_for_rings(1, PAGE_TIMEOUT_S)
+            lags = []
+            while time.monotonic() - page.opened < LAG_WITHIN_S:
+                end = page.state().timelines.get("capture_time", (None, None))[1]
+                lags.append(time.monotonic() - started - (end / 1e9 - T0) if end is not None else float("inf"))
+                if lags[-1] <= LAG_LIMIT_S:
+                    break
+                time.sleep(1.0)
+        assert proc.poll() is None  # the session runs on
+        assert lags and lags[-1] <= LAG_LIMIT_S, f"lag behind the live clock every second after the figure: {lags}"
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=60)
+    assert proc.returncode in (0, 130)

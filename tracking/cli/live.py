@@ -90,8 +90,8 @@ def live(
 ) -> None:
     """Track every camera live, fuse them, record, and stream to the superintendent's view (and Foxglove)."""
     from tracking.rig import load_rig
-    from tracking.sources import check_sources
-    from viewer.playback import resolve_bind, start_live_viewer, web_viewer_url
+    from tracking.sources import byte_rate, check_sources
+    from viewer.playback import late_join_bytes, resolve_bind, start_live_viewer, web_viewer_url
 
     if spawn and web:
         raise InputError("--spawn/--web", "choose one viewer")
@@ -100,7 +100,9 @@ def live(
     rrd, out = _session_files(the_rig, rrd, out)
     fox_address = _check_ports(bind, spawn, web, foxglove, port, grpc_port, web_port)
     warn_rig(the_rig)  # once the inputs are accepted: bad input stays the one line on stderr
-    viewer_process = start_live_viewer(web, bind, grpc_port, web_port) if spawn or web else None
+    server_bytes = late_join_bytes([byte_rate(the_rig, c) for c in the_rig.cameras], viewer_scope.value) \
+        if web else None
+    viewer_process = start_live_viewer(web, bind, grpc_port, web_port, server_bytes) if spawn or web else None
     if web:
         console.print(f"web viewer: {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}")
     session = LiveSession(the_rig, rrd, out, viewer_process=viewer_process, stale_s=stale)
