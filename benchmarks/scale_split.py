@@ -334,8 +334,11 @@ def section(m: dict, chunk_over_s: float, efficiency: float) -> list[str]:
                      f"{1000 * r['main_cpu'] / r['frames']:.2f} | {r['load'][0]:.1f} → {r['load'][1]:.1f} | "
                      f"{'yes' if same else 'NO'} |")
     s1, s2 = runs["1 worker, split"], runs["2 workers, split"]
+    busiest = max(max(r["load"]) for r in runs.values())
     lines += [
         "",
+        *([f"- **Not quiet**: the load reached {busiest:.1f} on 2 cores during these runs (other jobs): the speed-ups "
+           "below are lower than on an idle machine."] if busiest > 2.5 else []),
         f"- 2 workers against 1, split: **{s1['wall'] / s2['wall']:.2f}×**; one pass: "
         f"**{base['wall'] / two['wall']:.2f}×** (the issue's target: 1.8× for the whole `track`). *Same CSV*: the "
         "split runs against each other (1 and 2 workers), the one-pass runs likewise; split and one pass differ by "

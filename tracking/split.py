@@ -45,11 +45,12 @@ from tracking.scale import ScaleEvidence
 
 SPLIT_MODES = ("fused", "smoothed")  # the modes with a filter; paper and raw cost nothing worth splitting
 SEGMENT_S = 300.0  # s of capture kept per segment: the lead-in is LEAD_IN_S / SEGMENT_S (7 %) more filter work, and
-# six hours are 72 segments, enough for every core of 8 nodes of 16 to fuse one in turn while the others detect
-# (benchmarks/results/scale.md); a run no longer than this is fused in one pass, as before
+# six hours are 72 segments, fused on as many cores while the others detect (benchmarks/results/scale.md); a run no
+# longer than this is fused in one pass, as before
 LEAD_IN_S = 20.0  # s fused before a segment's start and dropped: the cameras placed (an ambiguous far view waits
-# for evidence, 1-5 s), the topside placed and warmed up (REPORT_WARMUP_S), the cameras' poses and biases settled to
-# within 0.5σ of the one pass's (benchmarks/results/scale.md: 10 s did not hold everywhere, 20 s did)
+# for the evidence), the topside placed and warmed up (REPORT_WARMUP_S), the cameras' poses and biases settled to
+# within 0.5σ of the one pass's (benchmarks/results/scale.md: with 10 s offsets stayed up to 0.7σ off for 9 s
+# after a segment's start, with 20 s none was beyond 0.37σ)
 TRAIL_S = {"fused": 0.0, "smoothed": SMOOTHER_LAG_S}  # s read past a segment's end: the smoother's look-ahead (the
 # one pass smooths every step with SMOOTHER_LAG_S of the future at least)
 
