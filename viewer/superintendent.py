@@ -29,7 +29,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from tracking.estimate import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
-from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_M
+from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_SIDES
 from tracking.live import STALE_S, CameraHealth
 from tracking.rig import Rig
 from tracking.sources import CameraState
@@ -132,10 +132,10 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
         return WITHHELD_CLOCKS if short else (
             "the topside moves while its cameras' clocks are known only to the rig's time_offset_sigma, so where it "
             "is at a frame's time is not known well enough: measure the clocks with topside sync")
-    if short:  # not the limit: the reading does not say whether the warm-up's (25 mm) or the later one (50 mm) held
+    if short:  # not the limit: the reading does not say whether the warm-up's or the later one (50 mm) held
         return WITHHELD_SIGMA
-    return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_M * 1e3:.0f} mm in the first "
-            f"{REPORT_WARMUP_S:g} s after the topside is placed): the cameras do not see this cone well enough")
+    return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_SIDES:.1%} of a marker side in the "
+            f"first {REPORT_WARMUP_S:g} s after the topside is placed): the cameras do not see this cone well enough")
 
 
 def cones_line(readings: Sequence[ConeReading], stale_s: float = STALE_S) -> str:

@@ -313,9 +313,10 @@ def test_a_camera_gets_the_process_noise_its_images_show() -> None:
 
 def test_warming_up_the_filter_reports_only_tight_cones() -> None:
     """For REPORT_WARMUP_S after the topside is placed a cone is shown only with σ ≤ 25 mm, then up to 50 mm."""
-    from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_M
+    from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_SIDES
 
     the_rig = camera_rig()
+    REPORT_WARMUP_SIGMA_M = REPORT_WARMUP_SIGMA_SIDES * the_rig.marker_size  # 25 mm for its 1 m markers
     kf = TopsideFilter(the_rig)
     shown = []
     for o in observations(the_rig, 6.0):
@@ -332,9 +333,10 @@ def test_warming_up_the_filter_reports_only_tight_cones() -> None:
 
 def test_the_smoother_warms_up_as_the_live_filter() -> None:
     """The smoother's first seconds rest on the same first frames: it too withholds cones wider than 25 mm there."""
-    from tracking.estimator.noise import REPORT_WARMUP_SIGMA_M
+    from tracking.estimator.noise import REPORT_WARMUP_SIGMA_SIDES
 
     the_rig = camera_rig()
+    REPORT_WARMUP_SIGMA_M = REPORT_WARMUP_SIGMA_SIDES * the_rig.marker_size
     obs = observations(the_rig, 6.0)
     smoothed = list(smoothed_estimates(the_rig, obs))
     start = min(e.time for e in smoothed)
@@ -343,6 +345,20 @@ def test_the_smoother_warms_up_as_the_live_filter() -> None:
     withheld = [np.sqrt(np.diag(e.covariance)).max() for e in early if np.isnan(e.offset).all()]
     assert shown and withheld
     assert max(shown) <= REPORT_WARMUP_SIGMA_M < min(withheld)
+
+
+def test_the_warm_up_limit_scales_with_the_markers() -> None:
+    """A 4 cm board at 1 m is a 1 m marker at 25 m: while warming up, 5 mm of σ is tight for 1 m markers and loose
+    for 4 cm ones (the real webcams' first second showed 36 mm at σ 3 mm)."""
+    from tracking.estimator.noise import STATE
+
+    for size, shown in ((1.0, True), (0.04, False)):
+        kf = TopsideFilter(camera_rig().model_copy(update={"marker_size": size}))
+        P = kf.P.copy()
+        P[:STATE, :STATE] = np.diag([0.005**2] * 3 + [1e-12] * 3 + [1e-6] * 6)  # the topside's position to 5 mm
+        estimates = kf.cone_estimates(kf.x, P, 0.0, (), warming=True)
+        assert all(np.isfinite(e.offset).all() == shown for e in estimates), size
+        assert all(np.isfinite(e.offset).all() for e in kf.cone_estimates(kf.x, P, 0.0, (), warming=False))
 
 
 def test_a_long_run_is_smoothed_piece_by_piece() -> None:

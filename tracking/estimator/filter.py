@@ -27,7 +27,7 @@ from tracking.estimator.noise import (
     REINIT_AFTER_REJECTS,
     REPORT_MAX_SIGMA_M,
     REPORT_WARMUP_S,
-    REPORT_WARMUP_SIGMA_M,
+    REPORT_WARMUP_SIGMA_SIDES,
     STATE,
     block_noises,
     camera_psds,
@@ -215,15 +215,17 @@ class TopsideFilter(FilterState):
                        time: float | None = None, cameras: tuple[str, ...] | None = None,
                        warming: bool | None = None) -> list[ConeEstimate]:
         """Offset and covariance at every cone from a state (default: the current one), withholding cones whose σ
-        exceeds REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_M while warming (default: whether the filter is now); from
-        the current state, with the placed cameras' poses (a past state's are relative to nominals since moved)."""
+        exceeds REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_SIDES of a marker side while warming (default: whether the
+        filter is now); from the current state, with the placed cameras' poses (a past state's are relative to
+        nominals since moved)."""
         poses = None if x is not None else {name: self.camera_pose(cam) for name, cam in self.cameras.items()
                                             if cam.T_jacket_camera is not None}
         x = self.x if x is None else x
         P = self.P if P is None else P
         time = (self.time if time is None else time) or 0.0
         cameras = self.contributing() if cameras is None else cameras
-        limit = REPORT_WARMUP_SIGMA_M if (self.warming() if warming is None else warming) else REPORT_MAX_SIGMA_M
+        limit = min(REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_SIDES * self.rig.marker_size) \
+            if (self.warming() if warming is None else warming) else REPORT_MAX_SIGMA_M
         clock = self.clock_bound(cameras)
         out = []
         names, H = self.cone_rows

@@ -26,7 +26,8 @@ ROTATION_FLOOR_RAD = 1e-3  # σ added to every measured body rotation, for the s
 REPORT_MAX_SIGMA_M = 0.05  # a cone whose offset σ exceeds this on any axis is reported as unknown (NaN): 3σ must fit
 # in the 150 mm concentricity tolerance for a number to be worth showing
 REPORT_WARMUP_S = 4.0  # for this long after the topside is placed, a cone is reported only when its σ is below
-REPORT_WARMUP_SIGMA_M = 0.025  # this: the first seconds' camera poses are poorly known and not Gaussian
+REPORT_WARMUP_SIGMA_SIDES = 0.025  # this many marker sides (25 mm for 1 m markers): the first seconds' camera poses
+# are poorly known and not Gaussian, by as much as the scene is large (a 4 cm board at 1 m is a 1 m marker at 25 m)
 SMOOTHER_SPAN_S = 30.0  # recorded runs are smoothed this much at a time, each time with SMOOTHER_LAG_S of the
 SMOOTHER_LAG_S = 45.0  # future after it: memory holds both, not the whole run; a still camera gains from the far future
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame (edge-fit corners in fog and rain: 0.1 px median)
