@@ -227,7 +227,11 @@ def late_runs(scene: Path, opens: list[float], scopes: list[str], follow_s: floa
                    "--rrd", str(work / "live.rrd"), "--segment-minutes", "1"]
             case = f"{scope}, opened {open_s:g} s in"
             with serving(cmd, "web viewer: ") as served:
+                deadline = time.monotonic() + TIMEOUT_S
                 while (start := served.printed(suffix=": live")) is None:
+                    if served.process.poll() is not None or time.monotonic() > deadline:
+                        printed = "".join(t for _, t in served.lines)
+                        raise RuntimeError(f"live printed no camera's first frame: {printed}")
                     time.sleep(0.05)
                 time.sleep(max(0.0, start + open_s - time.monotonic()))
                 with web_viewer(served.url, TABLET) as page:
@@ -248,12 +252,12 @@ def late_runs(scene: Path, opens: list[float], scopes: list[str], follow_s: floa
     return out
 
 
-def late_lines(runs: list[LateOpen]) -> list[str]:
+def late_lines(runs: list[LateOpen], longest: bool) -> list[str]:
     """The late-open table: first figure, past sent, lag at 30 s and the worst after it."""
     lines = ["## Pages opened late", "",
              "`--late`: `topside live --web --speed 1 --loop` on the scene, the page opened N s in and its lag "
              f"(the live clock minus the newest capture time it holds) sampled every {SAMPLE_S:g} s "
-             f"for {FOLLOW_S:g} s ({LONG_FOLLOW_S:g} s for the longest). Past "
+             f"for {FOLLOW_S:g} s{f' ({LONG_FOLLOW_S:g} s for the longest)' if longest else ''}. Past "
              "sent: the capture time the page held at its first figure (what the server kept for it, "
              "viewer.playback.late_join_bytes). Target: first figure ≤ 10 s, lag ≤ 5 s within 30 s and after.", "",
              "| case | server keeps | first figure [s] | past sent [s] | lag at 30 s [s] | worst lag after 30 s [s] | "
@@ -345,6 +349,8 @@ def main() -> None:
                         "the first scope only (e.g. 1800: a page opened after half an hour)")
     args = parser.parse_args()
     scene = render_scene(SCENARIO, (920, 600), CLIP_S)
+    if args.long is not None and not args.late:
+        parser.error("--long goes with --late")
     if args.late:
         load = os.getloadavg()
         scopes = args.scopes.split(",")
@@ -354,7 +360,7 @@ def main() -> None:
         lines = ["# A page opened late into a live session", "",
                  f"{SCENARIO}, 4 cameras at 15 FPS, 920×600, looped; headless Chromium at {TABLET['width']}×"
                  f"{TABLET['height']}, software WebGL, on the same {os.cpu_count()} cores as the tracker; load average "
-                 f"{load[0]:.1f} before, {os.getloadavg()[0]:.1f} after.", "", *late_lines(runs)]
+                 f"{load[0]:.1f} before, {os.getloadavg()[0]:.1f} after.", "", *late_lines(runs, args.long is not None)]
         write_results("web_late_open", lines, echo=True)
         return
     load = os.getloadavg()

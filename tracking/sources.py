@@ -21,7 +21,16 @@ import numpy as np
 
 from tracking.errors import InputError
 from tracking.frame_times import FrameClock
-from tracking.images import Frame, VideoHealth, decoded_frames, frames, is_image, open_video, to_the_end
+from tracking.images import (
+    Frame,
+    VideoHealth,
+    decoded_frames,
+    frames,
+    is_image,
+    open_video,
+    passes_through,
+    to_the_end,
+)
 from tracking.rig import CameraEntry, Rig
 
 STREAM_PREFIXES = ("rtsp:", "rtsps:", "http:", "https:", "udp:", "tcp:", "srt:")
@@ -220,20 +229,24 @@ def camera_frames(rig: Rig, entry: CameraEntry, pacer: Pacer, loop_until: float 
 
 
 def byte_rate(rig: Rig, entry: CameraEntry) -> float:
-    """Bytes per second of a camera's video as the recording and a live viewer get it: a file's size over its
-    duration, a device's encoding (ENCODE_BITRATE), a stream's assumed STREAM_ASSUMED_BITRATE."""
+    """Bytes per second of a camera's video as the recording and a live viewer get it: a file whose H.264 passes
+    through, its size over its duration; a device, its encoding (ENCODE_BITRATE); a stream, or a file re-coded as a
+    JPEG a frame (about as much at 920×600 and 15 FPS) or unreadable, STREAM_ASSUMED_BITRATE."""
     kind = source_kind(entry.source)
     if kind == SourceKind.DEVICE:
         return ENCODE_BITRATE / 8
+    assumed = STREAM_ASSUMED_BITRATE / 8
     if kind == SourceKind.STREAM:
-        return STREAM_ASSUMED_BITRATE / 8
+        return assumed
     path = rig.resolve(entry.source)
     try:
         with open_video(path) as container:
             duration = (container.duration or 0) / av.time_base
-    except InputError:
-        duration = 0.0
-    return path.stat().st_size / duration if duration > 0 else STREAM_ASSUMED_BITRATE / 8
+            if not passes_through(container.streams.video[0]):
+                return assumed
+        return path.stat().st_size / duration if duration > 0 else assumed
+    except (InputError, OSError):
+        return assumed
 
 
 def first_capture_time(rig: Rig, entry: CameraEntry) -> float | None:

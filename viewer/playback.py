@@ -27,12 +27,17 @@ SPLIT_UNITS = {"ns": 1e-9, "us": 1e-6, "µs": 1e-6, "ms": 1e-3, "s": 1.0}
 GRPC_PORT = 9876
 WEB_PORT = 9090
 VIEWER_MEMORY_LIMIT = "2GB"  # a six-hour session: the viewer drops the oldest data beyond this, the file keeps all
-LATE_JOIN_S = 20.0  # a web page opened late is sent about this much of the past (its server keeps no more; the layout
-# and static data are kept apart and always sent): opening it after six hours costs what opening it after one does
-VIEW_OVERHEAD_BPS = {"superintendent": 10_000, "all": 100_000}  # bytes/s per camera a live viewer's stream carries
-# beyond the camera's video: the figures (superintendent) or the detections, poses and health as recorded (all);
-# measured on 4 cameras at 15 FPS (benchmarks/results/web_first_figure.md: 0.27 and 0.73 MB/s with 0.34 MB/s of video)
-MIN_SERVER_MEMORY_BYTES = 4 << 20  # the web server keeps at least this (the layout's static data, a few keyframes)
+LATE_JOIN_S = 20.0  # s: a web page opened late is sent about this much of the past, so opening it after six hours
+# costs what opening it after one does. Its server keeps no more: Rerun drops the oldest temporal data beyond its
+# limit first, static data only after all of that, the layout never. With 60 s a page opened 60 s in fell 20 s behind
+# for 40 s while the backlog loaded; with 20 s it was within 0.6 s from 25 s on (results/web_late_open.md)
+VIEW_OVERHEAD_BYTES_PER_S = {"superintendent": 10_000, "all": 100_000}  # per camera, what a live viewer's stream
+# carries beyond the camera's video: the figures (superintendent), or the detections, poses and health as recorded
+# (all). Measured on config2-procedure5, 4 cameras at 15 FPS, 920×600, the live path flat out into a file: the
+# superintendent stream 0.27 MB/s (the figures, and the video of the cameras its layout shows, not all four), "all"
+# 0.73 MB/s, the four videos 0.34 MB/s
+MIN_SERVER_MEMORY_BYTES = 4 << 20  # the web server keeps at least this: two 2-second keyframe intervals of four
+# cameras at 2 Mbit/s (the layout and the static figures weigh kilobytes)
 STDIN = "-"  # rerun's data source for its standard input: what a live session feeds (viewer/feed.py)
 # Rerun's analytics pipeline (re_analytics, native/pipeline.rs) starts nothing when CI is set ("Analytics disabled on
 # CI"); FORCE_RERUN_ANALYTICS would override that, so it is dropped. The user's own analytics.json is left alone.
@@ -222,10 +227,11 @@ def viewer_command(recording: Path, web: bool = False, address: str = "127.0.0.1
     return [rerun_binary(), str(recording), "--bind", address, "--port", port]
 
 
-def late_join_bytes(video_bps: list[float], scope: str) -> int:
+def late_join_bytes(video_bytes_per_s: list[float], scope: str) -> int:
     """What a live web server keeps for a page opened late, bytes: LATE_JOIN_S of the viewer's stream, from each
     camera's video rate (bytes/s, tracking.sources.byte_rate) and the scope's overhead per camera."""
-    rate = sum(video_bps) + VIEW_OVERHEAD_BPS.get(scope, max(VIEW_OVERHEAD_BPS.values())) * len(video_bps)
+    overhead = VIEW_OVERHEAD_BYTES_PER_S.get(scope, max(VIEW_OVERHEAD_BYTES_PER_S.values()))
+    rate = sum(video_bytes_per_s) + overhead * len(video_bytes_per_s)
     return max(MIN_SERVER_MEMORY_BYTES, int(LATE_JOIN_S * rate))
 
 

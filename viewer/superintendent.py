@@ -134,8 +134,9 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
             "is at a frame's time is not known well enough: measure the clocks with topside sync")
     if short:  # not the limit: the reading does not say whether the warm-up's or the later one (50 mm) held
         return WITHHELD_SIGMA
-    return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_SIDES:.1%} of a marker side in the "
-            f"first {REPORT_WARMUP_S:g} s after the topside is placed): the cameras do not see this cone well enough")
+    return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for 1 m markers in "
+            f"the first {REPORT_WARMUP_S:g} s after the topside is placed): the cameras do not see this cone well "
+            "enough")
 
 
 def cones_line(readings: Sequence[ConeReading], stale_s: float = STALE_S) -> str:

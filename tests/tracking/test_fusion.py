@@ -316,7 +316,7 @@ def test_warming_up_the_filter_reports_only_tight_cones() -> None:
     from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_SIDES
 
     the_rig = camera_rig()
-    REPORT_WARMUP_SIGMA_M = REPORT_WARMUP_SIGMA_SIDES * the_rig.marker_size  # 25 mm for its 1 m markers
+    warmup_limit = REPORT_WARMUP_SIGMA_SIDES * the_rig.marker_size  # 25 mm for its 1 m markers
     kf = TopsideFilter(the_rig)
     shown = []
     for o in observations(the_rig, 6.0):
@@ -328,7 +328,7 @@ def test_warming_up_the_filter_reports_only_tight_cones() -> None:
     early = [sd for age, sd in shown if age < REPORT_WARMUP_S]
     late = [sd for age, sd in shown if age >= REPORT_WARMUP_S]
     assert early and late
-    assert max(early) <= REPORT_WARMUP_SIGMA_M < max(late) <= REPORT_MAX_SIGMA_M
+    assert max(early) <= warmup_limit < max(late) <= REPORT_MAX_SIGMA_M
 
 
 def test_the_smoother_warms_up_as_the_live_filter() -> None:
@@ -336,7 +336,7 @@ def test_the_smoother_warms_up_as_the_live_filter() -> None:
     from tracking.estimator.noise import REPORT_WARMUP_SIGMA_SIDES
 
     the_rig = camera_rig()
-    REPORT_WARMUP_SIGMA_M = REPORT_WARMUP_SIGMA_SIDES * the_rig.marker_size
+    warmup_limit = REPORT_WARMUP_SIGMA_SIDES * the_rig.marker_size
     obs = observations(the_rig, 6.0)
     smoothed = list(smoothed_estimates(the_rig, obs))
     start = min(e.time for e in smoothed)
@@ -344,7 +344,7 @@ def test_the_smoother_warms_up_as_the_live_filter() -> None:
     shown = [np.sqrt(np.diag(e.covariance)).max() for e in early if np.isfinite(e.offset).all()]
     withheld = [np.sqrt(np.diag(e.covariance)).max() for e in early if np.isnan(e.offset).all()]
     assert shown and withheld
-    assert max(shown) <= REPORT_WARMUP_SIGMA_M < min(withheld)
+    assert max(shown) <= warmup_limit < min(withheld)
 
 
 def test_the_warm_up_limit_scales_with_the_markers() -> None:
@@ -357,6 +357,7 @@ def test_the_warm_up_limit_scales_with_the_markers() -> None:
         P = kf.P.copy()
         P[:STATE, :STATE] = np.diag([0.005**2] * 3 + [1e-12] * 3 + [1e-6] * 6)  # the topside's position to 5 mm
         estimates = kf.cone_estimates(kf.x, P, 0.0, (), warming=True)
+        assert estimates
         assert all(np.isfinite(e.offset).all() == shown for e in estimates), size
         assert all(np.isfinite(e.offset).all() for e in kf.cone_estimates(kf.x, P, 0.0, (), warming=False))
 

@@ -97,9 +97,9 @@ def test_a_page_opened_a_minute_into_a_live_session_shows_the_present(installati
         deadline = time.monotonic() + START_TIMEOUT_S
         while not any(": live" in t for _, t in lines) and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.05)
-        url = next(t.split("web viewer: ", 1)[1].strip() for _, t in lines if "web viewer: http" in t)
-        assert f"127.0.0.1:{web_port}" in url
-        started = next(at for at, t in lines if ": live" in t)  # the first frame's capture time, T0, on the live clock
+        url = next((t.split("web viewer: ", 1)[1].strip() for _, t in lines if "web viewer: http" in t), "")
+        started = next((at for at, t in lines if ": live" in t), None)  # the first frame's capture time, T0, then
+        assert f"127.0.0.1:{web_port}" in url and started is not None, "".join(t for _, t in lines)
         time.sleep(LATE_OPEN_S)
         with web_viewer(url) as page:
             page.wait_for_rings(1, PAGE_TIMEOUT_S)
@@ -111,8 +111,14 @@ def test_a_page_opened_a_minute_into_a_live_session_shows_the_present(installati
                     break
                 time.sleep(1.0)
         assert proc.poll() is None  # the session runs on
-        assert lags and lags[-1] <= LAG_LIMIT_S, f"lag behind the live clock every second after the figure: {lags}"
+        assert lags and -1.0 <= lags[-1] <= LAG_LIMIT_S, f"lag behind the live clock, every second: {lags}"
     finally:
         proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=60)
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        for reader in readers:
+            reader.join(timeout=10)
     assert proc.returncode in (0, 130)
