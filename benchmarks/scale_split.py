@@ -387,16 +387,15 @@ def section(m: dict, chunk_over_s: float, efficiency: float) -> list[str]:
         "0, then the last segment's fusion after the last frame. Assumed as in the projection above: storage and "
         "network keep up, no stragglers.",
         "",
-        "| nodes × 16 cores | fusion ms/frame before / after (item 2) | one pass | bound by | split | bound by |",
+        "| nodes × 16 cores | fusion f, ms/frame | one pass | bound by | split | bound by |",
         "|---:|---|---:|---|---:|---|",
     ]
     for nodes, cores, one, one_bound, split, split_bound in project(c, f, d_one, d, chunk_over_s, efficiency):
-        lines.append(f"| {nodes} ({cores} cores) | {1000 * f:.2f} / _ | {hours(one)} | {one_bound} | "
+        lines.append(f"| {nodes} ({cores} cores) | {1000 * f:.2f} | {hours(one)} | {one_bound} | "
                      f"**{hours(split)}** | {split_bound} |")
     lines += [
         "",
         f"The driver's d × {HOURS * 3600 * FPS * CAMERAS / 1e6:.2f} M frames is the floor of one installation "
-        f"however many nodes: {hours(HOURS * 3600 * FPS * CAMERAS * d)}. The column *before / after* is for the "
-        "per-frame fusion cost of issue 35's item 2 (filled in by that work).",
+        f"however many nodes: {hours(HOURS * 3600 * FPS * CAMERAS * d)}.",
     ]
     return lines
