@@ -60,7 +60,8 @@ LoopOption = Annotated[bool, typer.Option("--loop", help="Replay video files aga
 LayoutOption = Annotated[Layout, typer.Option(help="Layout stored in the recording: superintendent or analysis.")]
 ScopeOption = Annotated[ViewerScope, typer.Option(help="What the viewer (--web, --spawn) of the superintendent's "
                                                        "layout gets: superintendent (what it shows) or all "
-                                                       "(everything recorded).")]
+                                                       "(everything recorded: for a workstation; a tablet's page "
+                                                       "falls behind on it).")]
 GrpcPortOption = Annotated[int, typer.Option(help="Port of the viewer's gRPC server (--web, --spawn).", min=1,
                                              max=65535)]
 FoxgloveOption = Annotated[bool, typer.Option("--foxglove", help="Stream the archive's channels to Foxglove (a "
