@@ -8,8 +8,12 @@ a browser of its own; this drives the system's chromium (apt-get install chromiu
 from __future__ import annotations
 
 import base64
+import math
 import shutil
+import signal
+import subprocess
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -168,6 +172,12 @@ class Browser:
         png = self.page.screenshot(path=str(path) if path is not None else None)
         return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
 
+    def lag(self, live_start: float, first_capture: float = 0.0) -> float:
+        """The live clock minus the newest capture time the page holds, s (NaN before it holds any): live_start is
+        when the session's first frame, of capture time first_capture, came (monotonic)."""
+        end = self.state().timelines.get("capture_time", (None, None))[1]
+        return time.monotonic() - live_start - (end / 1e9 - first_capture) if end is not None else math.nan
+
     def wait_for_state(self, ready, timeout: float) -> tuple[float, ViewerState]:
         """Poll the viewer's state until ready(state); (seconds since the page was opened, the state)."""
         deadline = time.monotonic() + timeout
@@ -209,6 +219,64 @@ class Browser:
             cdp.detach()
         last = ring_pixels(self.screenshot(), columns)
         raise TimeoutError(f"no state ring in every column: {last} px")
+
+
+@dataclass
+class Served:
+    """A topside command serving the viewer: its process, URL, and every line it printed with its time."""
+
+    process: subprocess.Popen
+    url: str
+    up_s: float  # seconds from the start until it printed the URL
+    lines: list[tuple[float, str]]  # (monotonic time, line)
+
+    def printed(self, prefix: str = "", suffix: str = "") -> float | None:
+        """When it first printed a line with this start and end (monotonic), or None."""
+        return next((t for t, line in self.lines if line.startswith(prefix) and line.rstrip().endswith(suffix)),
+                    None)
+
+    def wait_printed(self, suffix: str, timeout: float) -> float:
+        """When it printed a line ending so (monotonic), waited for; RuntimeError with its output if it ends or the
+        timeout passes first."""
+        deadline = time.monotonic() + timeout
+        while (at := self.printed(suffix=suffix)) is None:
+            if self.process.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"no line ending {suffix!r}: {''.join(t for _, t in self.lines)}")
+            time.sleep(0.05)
+        return at
+
+
+@contextmanager
+def serving(cmd: list[str], marker: str, timeout: float = 120.0) -> Iterator[Served]:
+    """A topside command printing a URL after `marker` within timeout s; its output (stdout and stderr) read and
+    timed on, so a full pipe never stops it; SIGTERM after, then SIGKILL if it has not ended within 60 s."""
+    t0 = time.monotonic()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines: list[tuple[float, str]] = []
+
+    def read() -> None:
+        for line in proc.stdout:
+            lines.append((time.monotonic(), line))
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        while not any(marker in line for _, line in lines):
+            if proc.poll() is not None or time.monotonic() - t0 > timeout:
+                raise RuntimeError(f"{' '.join(cmd)} printed no {marker!r} ({proc.returncode}): "
+                                   f"{''.join(t for _, t in lines)}")
+            time.sleep(0.02)
+        t_url, line = next((t, line) for t, line in lines if marker in line)
+        url = line.split(marker, 1)[1].strip().strip('"')
+        yield Served(proc, url, t_url - t0, lines)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        reader.join(timeout=10)
 
 
 def ring_pixels(image: np.ndarray, columns: int) -> list[int]:

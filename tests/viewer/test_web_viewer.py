@@ -5,13 +5,12 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import pytest
 
-from tests.browser import chromium, ring_pixels, web_viewer
+from tests.browser import chromium, ring_pixels, serving, web_viewer
 from tests.viewer.test_playback import free_port
 from viewer.superintendent import ROOT, STATE_RING_PX
 
@@ -83,42 +82,20 @@ LAG_WITHIN_S = 30.0  # ... this long of opening the page
 def test_a_page_opened_a_minute_into_a_live_session_shows_the_present(installation: Path, tmp_path: Path) -> None:
     from tests.conftest import T0
 
-    web_port, grpc_port = free_port(), free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "tracking.cli", "live", "--rig", str(installation / "rig.yaml"),
-                             "--rrd", str(tmp_path / "live.rrd"), "--web", "--web-port", str(web_port),
-                             "--grpc-port", str(grpc_port), "--speed", "1", "--loop"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines: list[tuple[float, str]] = []  # both outputs read to the end, timed: a full pipe would stop the session
-    readers = [threading.Thread(target=lambda f=f: lines.extend((time.monotonic(), t) for t in f), daemon=True)
-               for f in (proc.stdout, proc.stderr)]
-    for reader in readers:
-        reader.start()
-    try:
-        deadline = time.monotonic() + START_TIMEOUT_S
-        while not any(": live" in t for _, t in lines) and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.05)
-        url = next((t.split("web viewer: ", 1)[1].strip() for _, t in lines if "web viewer: http" in t), "")
-        started = next((at for at, t in lines if ": live" in t), None)  # the first frame's capture time, T0, then
-        assert f"127.0.0.1:{web_port}" in url and started is not None, "".join(t for _, t in lines)
+    web_port = free_port()
+    cmd = [sys.executable, "-m", "tracking.cli", "live", "--rig", str(installation / "rig.yaml"), "--rrd",
+           str(tmp_path / "live.rrd"), "--web", "--web-port", str(web_port), "--grpc-port", str(free_port()),
+           "--speed", "1", "--loop"]
+    with serving(cmd, "web viewer: ", START_TIMEOUT_S) as served:
+        assert f"127.0.0.1:{web_port}" in served.url
+        started = served.wait_printed(": live", START_TIMEOUT_S)  # the first frame, of capture time T0
         time.sleep(LATE_OPEN_S)
-        with web_viewer(url) as page:
+        with web_viewer(served.url) as page:
             page.wait_for_rings(1, PAGE_TIMEOUT_S)
-            lags = []
-            while time.monotonic() - page.opened < LAG_WITHIN_S:
-                end = page.state().timelines.get("capture_time", (None, None))[1]
-                lags.append(time.monotonic() - started - (end / 1e9 - T0) if end is not None else float("inf"))
-                if lags[-1] <= LAG_LIMIT_S:
-                    break
+            lags = [page.lag(started, T0)]
+            while not lags[-1] <= LAG_LIMIT_S and time.monotonic() - page.opened < LAG_WITHIN_S:
                 time.sleep(1.0)
-        assert proc.poll() is None  # the session runs on
-        assert lags and -1.0 <= lags[-1] <= LAG_LIMIT_S, f"lag behind the live clock, every second: {lags}"
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        for reader in readers:
-            reader.join(timeout=10)
-    assert proc.returncode in (0, 130)
+                lags.append(page.lag(started, T0))
+        assert served.process.poll() is None  # the session runs on
+        assert -1.0 <= lags[-1] <= LAG_LIMIT_S, f"lag behind the live clock, every second: {lags}"
+    assert served.process.returncode in (0, 130)
