@@ -16,14 +16,17 @@ observation, when it has one, holds its pair offsets and replaces them (preferre
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 
 import numpy as np
 
 from tracking.estimator.noise import (
     CORNER_GATE_CHI2,
     CORNER_HUBER_CHI2,
+    CORNER_ITERATIONS,
     CORNER_NOISE_PX,
     GATE_CHI2,
+    LINEARISATION_TOL_PX,
     STATE,
     VIEW,
     VIEW_BIAS_PX,
@@ -187,35 +190,88 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
                   time: float) -> bool:
     """One Kalman update with the corners (4, 2) of some markers of one body, each with its view's bias; False when
     none was used. Each marker's H touches only its columns (the bodies', its consider and bias states): the
-    products are taken over those."""
+    products are taken over those.
+
+    Iterated (an IEKF: Gauss-Newton on the update): where the update moves the state so far that the corners predicted
+    there depart from their linearisation by more than LINEARISATION_TOL_PX, the Jacobians are taken again at the
+    updated state and the update redone from the prior, up to CORNER_ITERATIONS times. A camera just placed from a far
+    marker moves metres at its first updates; Jacobians taken metres from where it settles grant information along
+    its swing about that marker which the corners never held (a confident wrong depth, docs/method.md)."""
     columns = [*(range(6) if topside else ()), *range(cam.index, cam.index + 6)]
     views = {marker: view(s, cam, marker, K, time).index for marker in sorted(corners)}
-    used: list[tuple[list[int], np.ndarray, np.ndarray, np.ndarray]] = []
+    x0, P0 = s.x, s.P  # the prior: apply replaces both arrays, never writes into them
+    rows: list[_Rows] = []
     for marker, z in sorted(corners.items()):
-        i = s.consider.markers.get(marker)
-        cols = columns if i is None else [*columns, *range(i, i + 6)]
-        h, J = corner_jacobian(s, placed(cam), cam.index, marker, s.x, K, cols)
-        v = views[marker]
-        idx = [*cols, *range(v, v + VIEW)]
-        H = np.hstack([J, _EYE8])  # (8, |idx|)
-        y = z.reshape(-1) - h - s.x[v:v + VIEW]
-        HPH = H @ s.P[np.ix_(idx, idx)] @ H.T
-        R = _corner_covariance(s, cam, J, HPH, y, topside)
-        if float(y @ np.linalg.solve(HPH + R, y)) > CORNER_GATE_CHI2:
+        r = _rows(s, cam, marker, z, K, columns, views[marker], x0, x0, P0, topside)
+        if float(r.y @ np.linalg.solve(r.H @ P0[np.ix_(r.idx, r.idx)] @ r.H.T + r.R, r.y)) > CORNER_GATE_CHI2:
             s.rejected += 1
             continue
-        used.append((idx, H, y, R))
-    if not used:
+        rows.append(r)
+    if not rows:
         return False
-    union = sorted({k for idx, *_ in used for k in idx})
-    where = {k: j for j, k in enumerate(union)}
-    H = np.zeros((VIEW * len(used), len(union)))
-    R = np.zeros((H.shape[0], H.shape[0]))
-    for k, (idx, H_k, _, R_k) in enumerate(used):
-        H[VIEW * k:VIEW * k + VIEW, [where[c] for c in idx]] = H_k
-        R[VIEW * k:VIEW * k + VIEW, VIEW * k:VIEW * k + VIEW] = R_k
-    s.apply(H, np.concatenate([u[2] for u in used]), R, union)
+    for iteration in range(CORNER_ITERATIONS):
+        s.x, s.P = x0, P0
+        _apply_rows(s, rows)
+        if iteration + 1 == CORNER_ITERATIONS or _linearisation_error(s, cam, rows, K) <= LINEARISATION_TOL_PX:
+            break
+        xi = s.x
+        rows = [_rows(s, cam, r.marker, corners[r.marker], K, columns, views[r.marker], xi, x0, P0, topside)
+                for r in rows]
     return True
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """One marker's part of a corner update, linearised at a state x: its state entries idx (C,), H (8, C), the
+    innovation y (8,) against the prior x0 (z - h(x) - bias + H (x - x0)), R (8, 8), and h (8,) and x where taken."""
+
+    marker: int
+    idx: list[int]
+    H: np.ndarray
+    y: np.ndarray
+    R: np.ndarray
+    h: np.ndarray
+    x: np.ndarray
+
+
+def _rows(s: FilterState, cam: CameraState, marker: int, z: np.ndarray, K: np.ndarray, columns: list[int], v: int,
+          x: np.ndarray, x0: np.ndarray, P0: np.ndarray, topside: bool) -> _Rows:
+    """A marker's corners z (4, 2) linearised at the state x (n,), their innovation against the prior x0 (n,) and
+    their noise (Huber-weighted against the prior's covariance P0 (n, n))."""
+    i = s.consider.markers.get(marker)
+    cols = columns if i is None else [*columns, *range(i, i + 6)]
+    h, J = corner_jacobian(s, placed(cam), cam.index, marker, x, K, cols)
+    idx = [*cols, *range(v, v + VIEW)]
+    H = np.hstack([J, _EYE8])  # (8, |idx|)
+    y = z.reshape(-1) - h - x[v:v + VIEW]
+    if x is not x0:
+        y = y + H @ (x[idx] - x0[idx])
+    HPH = H @ P0[np.ix_(idx, idx)] @ H.T
+    return _Rows(marker, idx, H, y, _corner_covariance(s, cam, J, HPH, y, topside), h, x)
+
+
+def _apply_rows(s: FilterState, rows: list[_Rows]) -> None:
+    """One Kalman update with every marker's rows, over the union of their state entries."""
+    union = sorted({k for r in rows for k in r.idx})
+    where = {k: j for j, k in enumerate(union)}
+    H = np.zeros((VIEW * len(rows), len(union)))
+    R = np.zeros((H.shape[0], H.shape[0]))
+    for k, r in enumerate(rows):
+        H[VIEW * k:VIEW * k + VIEW, [where[c] for c in r.idx]] = r.H
+        R[VIEW * k:VIEW * k + VIEW, VIEW * k:VIEW * k + VIEW] = r.R
+    s.apply(H, np.concatenate([r.y for r in rows]), R, union)
+
+
+def _linearisation_error(s: FilterState, cam: CameraState, rows: list[_Rows], K: np.ndarray) -> float:
+    """Largest departure, px, of the corners predicted at the updated state from their linearisation at the state
+    each marker's rows were taken at (the bias states enter linearly: left out)."""
+    worst = 0.0
+    for r in rows:
+        n_pose = len(r.idx) - VIEW
+        dx = s.x[r.idx[:n_pose]] - r.x[r.idx[:n_pose]]
+        linear = r.h + r.H[:, :n_pose] @ dx
+        worst = max(worst, float(np.abs(predict_corners(s, placed(cam), cam.index, r.marker, s.x, K) - linear).max()))
+    return worst
 
 
 def _corner_covariance(s: FilterState, cam: CameraState, J: np.ndarray, HPH: np.ndarray, y: np.ndarray,

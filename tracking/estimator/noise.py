@@ -52,6 +52,10 @@ GAUSSIAN_MEDIAN_CHI2_1 = 0.4549  # median of a χ² variable with 1 degree of fr
 PLACEMENT_GAIN = 25.0  # σ × 5 on the pose that first places a camera: it only linearises; the same frame's corners,
 # applied right after, carry its information (else counted twice)
 CORNER_GATE_CHI2 = 26.12  # 8 degrees of freedom (a marker's four corners), 99.9 %
+CORNER_ITERATIONS = 4  # at most this many linearisations of one corner update (an iterated EKF)
+LINEARISATION_TOL_PX = 0.015  # ... iterated while the updated state's corners depart from the linearisation by more
+# than a tenth of CORNER_NOISE_PX (a frame's corrections of millimetres depart by 1e-4 px; a camera's first metres, by
+# pixels)
 TOPSIDE_PLACEMENT_M = 1.0  # σ of the topside's position when a single view first places it
 PLACEMENT_FIT_P = 0.99  # a view places a camera or the topside only if its pose fits its corners as well as
 # CORNER_NOISE_PX would at this probability (χ² of the RMS over 8 N - 6 degrees of freedom, N markers)
