@@ -185,10 +185,11 @@ def topside_T(t: float) -> np.ndarray:
 
 
 def observations(the_rig: Rig, seconds: float, seed: int = 0, outlier_px: float = 0.0,
-                 far_roll_rad: float = 0.0) -> list[BodyObservation]:
+                 far_roll_rad: float = 0.0, far_turn: tuple[float, float] | None = None) -> list[BodyObservation]:
     """Each camera's view at 15 FPS, unsynchronised: corners projected with 0.1 px noise (one corner of the
     far camera's topside marker off by outlier_px in every frame; the far camera rolling and pitching by
-    far_roll_rad with an 8 s period, as on a vessel in waves)."""
+    far_roll_rad with an 8 s period, as on a vessel in waves; with far_turn (time, rad), still until that time and
+    then pitched by rad within 0.2 s, as by a slam)."""
     from tests.synthetic import look_at
 
     rng = np.random.default_rng(seed)
@@ -204,6 +205,10 @@ def observations(the_rig: Rig, seconds: float, seed: int = 0, outlier_px: float 
                 wobble = rotation(far_roll_rad * np.array([np.sin(phase), 0.0, np.cos(1.3 * phase)]))
                 T_camera_jacket = np.eye(4)
                 T_camera_jacket[:3, :3] = wobble
+                T_camera_jacket = T_camera_jacket @ np.linalg.inv(look_at(eye, target))
+            if name == "far" and far_turn is not None:
+                T_camera_jacket = np.eye(4)
+                T_camera_jacket[:3, :3] = rotation([far_turn[1] * float(np.clip((t - far_turn[0]) / 0.2, 0, 1)), 0, 0])
                 T_camera_jacket = T_camera_jacket @ np.linalg.inv(look_at(eye, target))
             poses = {}
             for m in the_rig.markers:
@@ -309,6 +314,29 @@ def test_a_camera_gets_the_process_noise_its_images_show() -> None:
     assert rolling_scale > 10 * still_scale
     assert still_error < 0.5 * drone
     assert np.abs(still_cones).mean() < 0.01 and np.abs(rolling_cones).mean() < 0.01
+
+
+def test_a_still_camera_jolted_takes_the_move_up_at_once() -> None:
+    """A 'moving' camera still for 8 s (its process noise lowered to what its images show: the level's median takes
+    seconds to rise) is turned by 30 mrad within 0.2 s: its jacket corners say so, it gets its mount's process noise
+    back at once, and its pose follows the turn within its σ instead of lagging 30 mrad behind for half a second."""
+    from tests.synthetic import look_at
+
+    the_rig = camera_rig("moving")
+    kf = TopsideFilter(the_rig)
+    turned = look_at(CAMERA_EYES["far"], np.array([12.0, -10.0, 0.0]))[:3, :3] @ rotation([0.03, 0.0, 0.0]).T
+    lags = []
+    for o in observations(the_rig, 9.0, far_turn=(8.0, 0.03)):
+        kf.predict(o.time, [o])
+        kf.update(o)
+        far = kf.cameras["far"]
+        if o.camera == "far" and 8.2 <= o.time <= 8.7 and far.T_jacket_camera is not None:
+            error = float(np.linalg.norm(rotvec(kf.camera_pose(far)[:3, :3].T @ turned)))
+            sd = float(np.sqrt(np.trace(kf.P[far.index:far.index + 3, far.index:far.index + 3])))
+            lags.append((error, sd))
+    assert kf.jolts >= 1
+    assert len(lags) >= 6
+    assert all(error < 0.01 and error < 3 * sd for error, sd in lags)
 
 
 def test_warming_up_the_filter_reports_only_tight_cones() -> None:

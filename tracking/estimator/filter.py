@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tracking.estimate import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
-from tracking.estimator.measurements import Measurement, corner_update, nearest, pair_rows, renew
+from tracking.estimator.measurements import Measurement, corner_update, jolted, nearest, pair_rows, renew
 from tracking.estimator.noise import (
     AMBIGUOUS_VARIANCE_GAIN,
     CAMERA_RATE_TAU_S,
@@ -66,8 +66,28 @@ class TopsideFilter(FilterState):
         self.P = bodies.covariance(self.P)
         self.fold_cameras()
         self.time = time if self.time is None else max(self.time, time)
-        keep = renew(self, [o for o in frame if isinstance(o, BodyObservation)])
+        observations = [o for o in frame if isinstance(o, BodyObservation)]
+        keep = renew(self, observations)
+        self._jolts(observations, noise, dt)
         return Transition(a, b, noise, keep)
+
+    def _jolts(self, observations: list[BodyObservation], noise: np.ndarray, dt: float) -> None:
+        """A camera whose jacket corners in this frame say it moved beyond its prior (measurements.jolted) gets its
+        mount's whole process noise back at once, where its motion level had lowered it (the level's median takes
+        seconds to rise): added to its predicted covariance and to noise (B, 12, 12), which the smoother replays."""
+        for o in observations:
+            cam = self.cameras.get(o.camera)
+            if cam is None or cam.T_jacket_camera is None or cam.motion_scale >= 1.0:
+                continue
+            if jolted(self, cam, {i: z for i, z in o.corners.items() if i in self.jacket_corners}, o.K):
+                k = cam.index // STATE
+                full = block_noises(dt, np.array([camera_psds(self.tuning, cam.mount)]))[0]
+                extra = full - noise[k]
+                b = slice(cam.index, cam.index + STATE)
+                self.P[b, b] += extra
+                noise[k] = full
+                cam.motion_scale = 1.0  # until its motion level next says otherwise
+                self.jolts += 1
 
     def update(self, m: Measurement) -> bool:
         """Apply one measurement; False when (its topside part) was gated out or could not be used."""

@@ -26,6 +26,7 @@ from tracking.estimator.noise import (
     CORNER_ITERATIONS,
     CORNER_NOISE_PX,
     GATE_CHI2,
+    JOLT_CHI2_2,
     LINEARISATION_TOL_PX,
     STATE,
     VIEW,
@@ -272,6 +273,28 @@ def _linearisation_error(s: FilterState, cam: CameraState, rows: list[_Rows], K:
         linear = r.h + r.H[:, :n_pose] @ dx
         worst = max(worst, float(np.abs(predict_corners(s, placed(cam), cam.index, r.marker, s.x, K) - linear).max()))
     return worst
+
+
+def jolted(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray) -> bool:
+    """Whether a placed camera's jacket corners (id -> (4, 2)) say it moved beyond its prior since its last frame:
+    the median of their corners' squared innovations (each over its own 2 × 2 innovation covariance) beyond
+    JOLT_CHI2_2. The median, so a rain-struck corner or marker does not count, while a camera that moved moves all."""
+    columns = list(range(cam.index, cam.index + 6))
+    d2: list[np.ndarray] = []
+    for marker, z in corners.items():
+        v = s.views.get((cam.name, marker))
+        if v is None:
+            continue
+        h, J = corner_jacobian(s, placed(cam), cam.index, marker, s.x, K, columns)
+        idx = [*columns, *range(v.index, v.index + VIEW)]
+        H = np.hstack([J, _EYE8])
+        y = z.reshape(-1) - h - s.x[v.index:v.index + VIEW]
+        S = H @ s.P[np.ix_(idx, idx)] @ H.T + max(CORNER_NOISE_PX, cam.model_px) ** 2 * _EYE8
+        S = S.reshape(4, 2, 4, 2)[np.arange(4), :, np.arange(4), :]  # (4, 2, 2): each corner's own block
+        det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+        u, w = y[0::2], y[1::2]
+        d2.append((S[:, 1, 1] * u * u - (S[:, 0, 1] + S[:, 1, 0]) * u * w + S[:, 0, 0] * w * w) / det)
+    return bool(d2) and float(np.median(np.concatenate(d2))) > JOLT_CHI2_2
 
 
 def _corner_covariance(s: FilterState, cam: CameraState, J: np.ndarray, HPH: np.ndarray, y: np.ndarray,

@@ -153,6 +153,7 @@ class FilterState:
     # first measured
     rejected: int = field(default=0, init=False)  # total gated measurements
     consecutive_rejects: int = field(default=0, init=False)  # of the topside
+    jolts: int = field(default=0, init=False)  # frames whose jacket corners widened their camera's covariance
     replacements: int = field(default=0, init=False)  # cameras placed again at a view that showed them moved beyond
     # their prior (TopsideFilter._jumped)
     last_accepted: dict[str, float] = field(init=False)  # camera -> capture time of its last topside view used
