@@ -79,7 +79,7 @@ class TopsideFilter(FilterState):
             cam = self.cameras.get(o.camera)
             if cam is None or cam.T_jacket_camera is None or cam.motion_scale >= 1.0:
                 continue
-            if jolted(self, cam, {i: z for i, z in o.corners.items() if i in self.jacket_corners}, o.K):
+            if jolted(self, cam, {i: z for i, z in o.corners.items() if i in self.jacket_corners}, o.K, o.time):
                 k = cam.index // STATE
                 full = block_noises(dt, np.array([camera_psds(self.tuning, cam.mount)]))[0]
                 extra = full - noise[k]

@@ -204,17 +204,20 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
     rows: list[_Rows] = []
     for marker, z in sorted(corners.items()):
         r = _rows(s, cam, marker, z, K, columns, views[marker], x0, x0, P0, topside)
-        if float(r.y @ np.linalg.solve(r.H @ P0[np.ix_(r.idx, r.idx)] @ r.H.T + r.R, r.y)) > CORNER_GATE_CHI2:
+        if float(r.y @ np.linalg.solve(r.HPH + r.R, r.y)) > CORNER_GATE_CHI2:
             s.rejected += 1
             continue
         rows.append(r)
     if not rows:
         return False
+    xi = x0
     for iteration in range(CORNER_ITERATIONS):
         s.x, s.P = x0, P0
-        _apply_rows(s, rows)
-        if iteration + 1 == CORNER_ITERATIONS or _linearisation_error(s, cam, rows, K) <= LINEARISATION_TOL_PX:
-            break
+        H, union = _apply_rows(s, rows)
+        step = float(np.max(np.abs(H @ (s.x[union] - xi[union]))))  # the update's largest corner travel, px
+        if iteration + 1 == CORNER_ITERATIONS or step**2 < 0.1 * LINEARISATION_TOL_PX * K[0, 0] or \
+                _linearisation_error(s, cam, rows, K) <= LINEARISATION_TOL_PX:
+            break  # a projection's second-order term is about (its first-order step)² / f: below the tolerance
         xi = s.x
         rows = [_rows(s, cam, r.marker, corners[r.marker], K, columns, views[r.marker], xi, x0, P0, topside)
                 for r in rows]
@@ -224,13 +227,15 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
 @dataclass(frozen=True)
 class _Rows:
     """One marker's part of a corner update, linearised at a state x: its state entries idx (C,), H (8, C), the
-    innovation y (8,) against the prior x0 (z - h(x) - bias + H (x - x0)), R (8, 8), and h (8,) and x where taken."""
+    innovation y (8,) against the prior x0 (z - h(x) - bias + H (x - x0)), R (8, 8), H P0 Hᵀ (8, 8), and h (8,) and x
+    where taken."""
 
     marker: int
     idx: list[int]
     H: np.ndarray
     y: np.ndarray
     R: np.ndarray
+    HPH: np.ndarray
     h: np.ndarray
     x: np.ndarray
 
@@ -248,11 +253,12 @@ def _rows(s: FilterState, cam: CameraState, marker: int, z: np.ndarray, K: np.nd
     if x is not x0:
         y = y + H @ (x[idx] - x0[idx])
     HPH = H @ P0[np.ix_(idx, idx)] @ H.T
-    return _Rows(marker, idx, H, y, _corner_covariance(s, cam, J, HPH, y, topside), h, x)
+    return _Rows(marker, idx, H, y, _corner_covariance(s, cam, J, HPH, y, topside), HPH, h, x)
 
 
-def _apply_rows(s: FilterState, rows: list[_Rows]) -> None:
-    """One Kalman update with every marker's rows, over the union of their state entries."""
+def _apply_rows(s: FilterState, rows: list[_Rows]) -> tuple[np.ndarray, list[int]]:
+    """One Kalman update with every marker's rows, over the union of their state entries; their stacked H (8 M, C)
+    and that union (C,)."""
     union = sorted({k for r in rows for k in r.idx})
     where = {k: j for j, k in enumerate(union)}
     H = np.zeros((VIEW * len(rows), len(union)))
@@ -261,6 +267,7 @@ def _apply_rows(s: FilterState, rows: list[_Rows]) -> None:
         H[VIEW * k:VIEW * k + VIEW, [where[c] for c in r.idx]] = r.H
         R[VIEW * k:VIEW * k + VIEW, VIEW * k:VIEW * k + VIEW] = r.R
     s.apply(H, np.concatenate([r.y for r in rows]), R, union)
+    return H, union
 
 
 def _linearisation_error(s: FilterState, cam: CameraState, rows: list[_Rows], K: np.ndarray) -> float:
@@ -275,11 +282,20 @@ def _linearisation_error(s: FilterState, cam: CameraState, rows: list[_Rows], K:
     return worst
 
 
-def jolted(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray) -> bool:
-    """Whether a placed camera's jacket corners (id -> (4, 2)) say it moved beyond its prior since its last frame:
+def jolted(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray, time: float) -> bool:
+    """Whether a placed camera's jacket corners (id -> (4, 2)) in its frame at a capture time say it moved beyond its
+    prior since its last frame:
     the median of their corners' squared innovations (each over its own 2 × 2 innovation covariance) beyond
     JOLT_CHI2_2. The median, so a rain-struck corner or marker does not count, while a camera that moved moves all."""
     columns = list(range(cam.index, cam.index + 6))
+    sigma2 = max(CORNER_NOISE_PX, cam.model_px) ** 2
+    views = {m: s.views[(cam.name, m)] for m in corners if (cam.name, m) in s.views}
+    predicted = {m: v.corners if v.time == time else predict_corners(s, placed(cam), cam.index, m, s.x, K)
+                 for m, v in views.items()}  # renew predicted the frame's views' corners already
+    bound = [np.sum((z.reshape(4, 2) - (predicted[m] + s.x[views[m].index:views[m].index + VIEW]).reshape(4, 2)) ** 2,
+                    axis=1) for m, z in corners.items() if m in views]  # |y|² per corner: d² ≤ |y|² / σ², S ≥ σ² I
+    if not bound or float(np.median(np.concatenate(bound))) <= JOLT_CHI2_2 * sigma2:
+        return False
     d2: list[np.ndarray] = []
     for marker, z in corners.items():
         v = s.views.get((cam.name, marker))
@@ -289,7 +305,7 @@ def jolted(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: 
         idx = [*columns, *range(v.index, v.index + VIEW)]
         H = np.hstack([J, _EYE8])
         y = z.reshape(-1) - h - s.x[v.index:v.index + VIEW]
-        S = H @ s.P[np.ix_(idx, idx)] @ H.T + max(CORNER_NOISE_PX, cam.model_px) ** 2 * _EYE8
+        S = H @ s.P[np.ix_(idx, idx)] @ H.T + sigma2 * _EYE8
         S = S.reshape(4, 2, 4, 2)[np.arange(4), :, np.arange(4), :]  # (4, 2, 2): each corner's own block
         det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
         u, w = y[0::2], y[1::2]
