@@ -18,7 +18,7 @@ Entity layout (the jacket frame is the world):
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -182,30 +182,60 @@ def log_frame(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: Fr
 
 
 def log_frame_image(rec: rr.RecordingStream, rig: Rig, camera: CameraModel, result: FrameResult,
-                    show_rejected: bool = False, jpeg_quality: int = JPEG_QUALITY) -> None:
-    """One camera frame in 2-D, at its capture time: image, marker outlines, corners, reprojected axes."""
+                    show_rejected: bool = False, jpeg_quality: int = JPEG_QUALITY, scale: float = 1.0) -> None:
+    """One camera frame in 2-D, at its capture time: image, marker outlines, corners, reprojected axes; with scale
+    under 1, the image a JPEG of the frame that many times its size and the overlays scaled with it (a tablet's
+    budget: view_camera gives the pinhole that goes with it)."""
     name = result.camera
     set_capture_time(rec, result.time)
     rr.set_time(f"frame_{name}", sequence=result.frame.index, recording=rec)
     base = f"world/cameras/{name}"
-    log_image(rec, f"{base}/image", result.frame, jpeg_quality)
+    if scale < 1.0:
+        log_scaled_image(rec, f"{base}/image", result.frame, scale, jpeg_quality)
+    else:
+        log_image(rec, f"{base}/image", result.frame, jpeg_quality)
     if not result.tracked:  # recorded only, to keep up: its overlays stay as they were
         return
+
+    def px(points: np.ndarray) -> np.ndarray:  # OpenCV pixel centres at integers, in the scaled image
+        return (points + 0.5) * scale - 0.5 if scale != 1.0 else points
+
     markers = result.detections.markers
-    outlines = [np.vstack([m.corners, m.corners[:1]]) for m in markers]
+    outlines = [px(np.vstack([m.corners, m.corners[:1]])) for m in markers]
     colors = [CHOICE_COLORS[result.poses[m.id].choice] if m.id in result.poses else REJECTED_COLOR for m in markers]
-    axes = [seg for pose in result.poses.values() for seg in marker_axes_px(pose, camera, rig.marker_size / 2)]
+    axes = [px(seg) for pose in result.poses.values() for seg in marker_axes_px(pose, camera, rig.marker_size / 2)]
     rr.log(f"{base}/image/markers",  # one entity: outlines labelled by id, reprojected axes, corners TL TR BR BL
            rr.LineStrips2D(outlines + axes, labels=[str(m.id) for m in markers] + [""] * len(axes),
                            colors=np.array(colors + AXIS_COLORS * len(result.poses), dtype=np.uint8).reshape(-1, 3),
                            radii=1.0),
-           rr.Points2D(np.vstack([m.corners for m in markers]) if markers else np.zeros((0, 2)), radii=2.0,
+           rr.Points2D(px(np.vstack([m.corners for m in markers])) if markers else np.zeros((0, 2)), radii=2.0,
                        colors=np.array([*AXIS_COLORS, (255, 255, 255)] * len(markers), dtype=np.uint8).reshape(-1, 3)),
            recording=rec)
     if show_rejected:
         rr.log(f"{base}/image/rejected", rr.LineStrips2D(
-            [np.vstack([c, c[:1]]) for c in result.detections.rejected], colors=REJECTED_COLOR, radii=0.5),
+            [px(np.vstack([c, c[:1]])) for c in result.detections.rejected], colors=REJECTED_COLOR, radii=0.5),
             recording=rec)
+
+
+def log_scaled_image(rec: rr.RecordingStream, path: str, frame: Frame, scale: float, jpeg_quality: int) -> None:
+    """A JPEG of the frame's pixels at scale (0, 1) of its size; nothing for a frame that kept only its packet."""
+    image = frame.bgr if frame.bgr is not None else frame.gray
+    if image is None:
+        return
+    size = (max(1, round(image.shape[1] * scale)), max(1, round(image.shape[0] * scale)))
+    small = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+    rr.log(path, rr.EncodedImage(contents=encode_jpeg(small, jpeg_quality), media_type="image/jpeg"), recording=rec)
+
+
+def view_camera(camera: CameraModel, scale: float) -> CameraModel:
+    """The camera as its images scaled by scale show it: intrinsics and size scaled (OpenCV pixel centres)."""
+    if scale >= 1.0 or camera.image_size is None:
+        return camera
+    K = camera.K.copy()
+    K[0, 0] *= scale
+    K[1, 1] *= scale
+    K[:2, 2] = (K[:2, 2] + 0.5) * scale - 0.5
+    return replace(camera, K=K, width=max(1, round(camera.width * scale)), height=max(1, round(camera.height * scale)))
 
 
 def log_health(rec: rr.RecordingStream, result: FrameResult) -> None:

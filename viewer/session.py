@@ -56,6 +56,7 @@ from viewer.recording import (
     log_video_codec,
     set_capture_time,
     topside_pose,
+    view_camera,
 )
 from viewer.superintendent import (
     ConeReading,
@@ -78,6 +79,16 @@ BACKLOG_TIMEOUT_S = 0.5  # ... but at most this long: a slow disk must not stall
 CLOSE_TIMEOUT_S = 10.0  # at the end, a live viewer is offered what is left for this long at most
 BACKLOG_MAX_PERIOD_S = 60.0  # after timeouts the period doubles up to this (a slow disk costs < 1 % of the time)
 VIEWER_SCOPES = ("superintendent", "all")  # what a live viewer of the superintendent's layout is sent
+VIEW_IMAGE_RATE_HZ = 2.0  # live: the superintendent's scope sends each shown camera's picture this often, as a JPEG
+VIEW_IMAGE_WIDTH_PX = 640  # ... at most this wide: a 920x600 stream of 2.6 Mbit/s becomes 0.3 Mbit/s (20 kB a picture)
+# that a tablet on the vessel's Wi-Fi keeps up with; the figures keep their own rate, the recording every frame
+VIEW_PICTURE_BYTES = 25_000  # a 640 px wide JPEG of a marker scene at JPEG_QUALITY, with margin (20 kB measured)
+
+
+def view_bytes_per_s(video_bytes_per_s: float, rate: float, width: int) -> float:
+    """A camera's bytes a second in the viewer's own stream: its pictures at rate (Hz) and width (px), else
+    (rate 0) its video."""
+    return video_bytes_per_s if rate <= 0 else min(video_bytes_per_s, rate * VIEW_PICTURE_BYTES * (width / 640) ** 2)
 
 
 class Compactor:
@@ -137,6 +148,8 @@ class Recorder:
     (its figures, and the images of the cameras it shows) through a stream of its own, so a tablet keeps up and opens
     at once; "all" sends it everything the file gets. forward: more sinks (on_frame, on_estimate) that get every
     frame and estimate as they come, unthrottled (the live Foxglove stream, viewer/foxglove_live.py).
+    view_image_rate, view_image_width: with the viewer's own stream, its pictures as JPEGs at most this often and this
+    wide (a tablet's budget; 0: every frame as the file has it).
     """
 
     def __init__(self, rig: Rig, rrd: Path | None = None, truth: pd.DataFrame | None = None,
@@ -144,8 +157,12 @@ class Recorder:
                  jpeg_quality: int = JPEG_QUALITY, viewer: ViewerFeed | None = None, segment_s: float | None = None,
                  stale_s: float = STALE_S, layout: str = "analysis",
                  options: Mapping[str, str] | None = None, estimate_period_s: float = 0.0,
-                 viewer_scope: str = "superintendent", forward: Sequence[Sink] = ()) -> None:
+                 viewer_scope: str = "superintendent", forward: Sequence[Sink] = (), view_image_rate: float = 0.0,
+                 view_image_width: int = VIEW_IMAGE_WIDTH_PX) -> None:
         self.rig = rig
+        self.view_image_rate = view_image_rate  # Hz; 0: the viewer's own stream gets every frame as recorded
+        self.view_image_width = view_image_width
+        self._view_image_at: dict[str, float] = {}  # camera -> capture time of its last picture in the viewer's stream
         self.truth = truth
         self.show_rejected = show_rejected
         self.jpeg_quality = jpeg_quality
@@ -321,7 +338,7 @@ class Recorder:
             gop.append(replace(result.frame, gray=None, bgr=None))  # the packet is all a segment needs
         log_frame(self.rec, self.rig, self.cameras[result.camera], result, self.show_rejected, self.jpeg_quality)
         if self._view is not None and result.camera in self._shown:
-            log_frame_image(self._view, self.rig, self.cameras[result.camera], result, jpeg_quality=self.jpeg_quality)
+            self._view_frame(result)
         self.status.frames[result.camera] = self.status.frames.get(result.camera, 0) + 1
         self.status.markers[result.camera] = self.status.markers.get(result.camera, 0) + len(result.poses)
         self._last_time = max(self._last_time, result.time)
@@ -446,13 +463,31 @@ class Recorder:
         """The file's stream, and the viewer's own when it has one."""
         return [self.rec] if self._view is None else [self.rec, self._view]
 
+    def _view_frame(self, result: FrameResult) -> None:
+        """A shown camera's frame into the viewer's own stream: every one, or a scaled JPEG at view_image_rate."""
+        camera = self.cameras[result.camera]
+        if self.view_image_rate <= 0:
+            log_frame_image(self._view, self.rig, camera, result, jpeg_quality=self.jpeg_quality)
+        elif result.time - self._view_image_at.get(result.camera, -np.inf) >= 1.0 / self.view_image_rate:
+            log_frame_image(self._view, self.rig, camera, result, jpeg_quality=self.jpeg_quality,
+                            scale=self._view_scale(result.camera))
+            self._view_image_at[result.camera] = result.time
+
+    def _view_scale(self, name: str) -> float:
+        """How many times its size a camera's pictures are in the viewer's own stream (at most 1)."""
+        width = self.cameras[name].width
+        return min(1.0, self.view_image_width / width) if self.view_image_rate > 0 and width else 1.0
+
     def _show_cameras(self, cameras: set[str]) -> None:
         """The viewer's own stream carries these cameras' images from now on; a newly shown camera's start with the
         packets since its newest keyframe, so its video decodes at once."""
         if self._view is None:
             return
         for name in sorted(cameras - self._shown):
-            log_frustum(self._view, f"world/cameras/{name}", self.cameras[name])
+            log_frustum(self._view, f"world/cameras/{name}", view_camera(self.cameras[name], self._view_scale(name)))
+            self._view_image_at.pop(name, None)  # its next frame is shown at once
+            if self.view_image_rate > 0:
+                continue  # pictures of their own: no video to start decoding
             if name in self._video:
                 log_video_codec(self._view, name)
             for frame in self._gop.get(name, []):

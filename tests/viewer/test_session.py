@@ -318,3 +318,60 @@ def test_the_viewers_own_stream_shows_a_camera_from_a_keyframe(installation: Pat
         first = np.argmin(times)
         assert keys[first][0], cam  # its video decodes from the first sample the viewer gets
         assert len(times) == sum(r.camera == cam for r in results)  # every frame of it, the early ones too
+
+
+def test_the_viewers_own_stream_sends_small_pictures_at_its_rate(installation: Path, tmp_path: Path) -> None:
+    """A tablet's budget: with view_image_rate, each shown camera's pictures reach the viewer's own stream as JPEGs
+    at most that often and at most view_image_width wide, their pinhole and marker outlines scaled with them; the
+    file keeps every frame of the video."""
+    import cv2
+
+    from tracking.live import LiveUpdate
+    from tracking.pipeline import track_rig
+    from tracking.rig import load_rig
+    from viewer.feed import ViewerFeed
+    from viewer.session import Recorder
+
+    rr.set_strict_mode(True)
+    rig = load_rig(installation / "rig.yaml")
+    results = list(track_rig(rig, packets=True))
+    view = ViewerFeed((tmp_path / "view.rrd").open("wb"))
+    recorder = Recorder(rig, tmp_path / "live.rrd", viewer=view, layout="superintendent", view_image_rate=2.0,
+                        view_image_width=320)
+    recorder.on_update(LiveUpdate(now=results[5].time, results=results[:6]))
+    recorder.on_update(LiveUpdate(now=results[-1].time, results=results[6:]))
+    recorder.close()
+    subprocess.run([rerun_binary(), "rrd", "merge", str(tmp_path / "view.rrd"), "-o", str(tmp_path / "merged.rrd")],
+                   check=True, capture_output=True, env=rerun_env())
+    chunks = chunks_by_entity(tmp_path / "merged.rrd")
+    recorded = chunks_by_entity(tmp_path / "live.rrd")
+    shown = set(recorder.cone_cameras().values())
+    assert shown
+    for cam in shown:
+        image = f"/world/cameras/{cam}/image"
+        times, blobs = component_rows(chunks[image], "EncodedImage:blob")
+        assert len(times) >= 2 and np.diff(times).min() >= 0.5 - 1e-6  # two a second at most
+        span = max(r.time for r in results if r.camera == cam) - min(r.time for r in results if r.camera == cam)
+        assert len(times) <= span * 2.0 + 2
+        picture = cv2.imdecode(np.frombuffer(bytes(blobs[-1][0]), np.uint8), cv2.IMREAD_UNCHANGED)
+        assert picture is not None and picture.shape[1] == 320
+        _, resolution = component_rows(chunks[f"/world/cameras/{cam}"], "Pinhole:resolution", timeline="")
+        assert resolution and resolution[0][0] == pytest.approx([320, 320 * picture.shape[0] / picture.shape[1]],
+                                                                 abs=1)
+        _, points = component_rows(chunks[f"{image}/markers"], "Points2D:positions")
+        assert max(p[0] for row in points for p in row) <= 320  # the corners on the small picture
+        assert "VideoStream:sample" not in {n for c in chunks[image] for n in c.to_record_batch().schema.names}
+        key_times, _ = component_rows(recorded[image], "VideoStream:is_keyframe")
+        assert len(key_times) == sum(r.camera == cam for r in results)  # the file: every frame of the video
+
+
+def test_the_live_commands_picture_budget_is_the_recorders() -> None:
+    """`topside live`'s defaults are the recorder's (the CLI starts without importing rerun), and the budget they
+    give a 920x600 camera streaming 2.6 Mbit/s is under a fifth of its video."""
+    from tracking.cli.options import VIEW_IMAGE_RATE_DEFAULT, VIEW_IMAGE_WIDTH_DEFAULT
+    from viewer.session import VIEW_IMAGE_RATE_HZ, VIEW_IMAGE_WIDTH_PX, view_bytes_per_s
+
+    assert (VIEW_IMAGE_RATE_DEFAULT, VIEW_IMAGE_WIDTH_DEFAULT) == (VIEW_IMAGE_RATE_HZ, VIEW_IMAGE_WIDTH_PX)
+    video = 2.6e6 / 8
+    assert view_bytes_per_s(video, VIEW_IMAGE_RATE_HZ, VIEW_IMAGE_WIDTH_PX) < 0.2 * video
+    assert view_bytes_per_s(video, 0.0, VIEW_IMAGE_WIDTH_PX) == video

@@ -17,7 +17,15 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from tracking.cli.common import console, err_console, rig_inputs, warn_lines, warn_rig
-from tracking.cli.options import WEB_PORT_DEFAULT, Layout, ViewerScope, WebPortOption, finite
+from tracking.cli.options import (
+    VIEW_IMAGE_RATE_DEFAULT,
+    VIEW_IMAGE_WIDTH_DEFAULT,
+    WEB_PORT_DEFAULT,
+    Layout,
+    ViewerScope,
+    WebPortOption,
+    finite,
+)
 from tracking.errors import InputError
 from tracking.outputs import Outputs, check_outputs
 
@@ -62,6 +70,11 @@ ScopeOption = Annotated[ViewerScope, typer.Option(help="What the viewer (--web, 
                                                        "layout gets: superintendent (what it shows) or all "
                                                        "(everything recorded: for a workstation; a tablet's page "
                                                        "falls behind on it).")]
+ViewImageRateOption = Annotated[float, typer.Option(help="Pictures a second of each camera the superintendent's scope "
+                                                          "sends the viewer, as JPEGs (0: its video, every frame: "
+                                                          "~10 times the bytes).", min=0.0, max=100.0)]
+ViewImageWidthOption = Annotated[int, typer.Option(help="Width, px, the superintendent's scope scales its pictures "
+                                                         "down to.", min=64, max=8192)]
 GrpcPortOption = Annotated[int, typer.Option(help="Port of the viewer's gRPC server (--web, --spawn).", min=1,
                                              max=65535)]
 FoxgloveOption = Annotated[bool, typer.Option("--foxglove", help="Stream the archive's channels to Foxglove (a "
@@ -84,6 +97,8 @@ def live(
     loop: LoopOption = False,
     layout: LayoutOption = Layout.SUPERINTENDENT,
     viewer_scope: ScopeOption = ViewerScope.SUPERINTENDENT,
+    view_image_rate: ViewImageRateOption = VIEW_IMAGE_RATE_DEFAULT,
+    view_image_width: ViewImageWidthOption = VIEW_IMAGE_WIDTH_DEFAULT,
     web_port: WebPortOption = WEB_PORT_DEFAULT,
     grpc_port: GrpcPortOption = GRPC_PORT_DEFAULT,
     foxglove: FoxgloveOption = False,
@@ -93,6 +108,7 @@ def live(
     from tracking.rig import load_rig
     from tracking.sources import byte_rate, check_sources
     from viewer.playback import late_join_bytes, resolve_bind, start_live_viewer, web_viewer_url
+    from viewer.session import view_bytes_per_s
 
     if spawn and web:
         raise InputError("--spawn/--web", "choose one viewer")
@@ -101,8 +117,10 @@ def live(
     rrd, out = _session_files(the_rig, rrd, out)
     fox_address = _check_ports(bind, spawn, web, foxglove, port, grpc_port, web_port)
     warn_rig(the_rig)  # once the inputs are accepted: bad input stays the one line on stderr
-    server_bytes = late_join_bytes([byte_rate(the_rig, c) for c in the_rig.cameras], viewer_scope.value) \
-        if web else None
+    rates = [byte_rate(the_rig, c) for c in the_rig.cameras]
+    if viewer_scope == ViewerScope.SUPERINTENDENT:
+        rates = [view_bytes_per_s(r, view_image_rate, view_image_width) for r in rates]
+    server_bytes = late_join_bytes(rates, viewer_scope.value) if web else None
     viewer_process = start_live_viewer(web, bind, grpc_port, web_port, server_bytes) if spawn or web else None
     if web:
         console.print(f"web viewer: {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}")
@@ -111,7 +129,8 @@ def live(
     try:
         if fox_address is not None:
             session.fox = _foxglove(the_rig, fox_address, port, warn=not (spawn or web))
-        replay_over = session.record(speed, duration, segment_minutes * 60, layout, viewer_scope, loop)
+        replay_over = session.record(speed, duration, segment_minutes * 60, layout, viewer_scope, loop,
+                                     view_image_rate, view_image_width)
         if replay_over and viewer_process is not None:  # the files ended: what they showed stays on view
             session.finish()
             console.print(written := session.written(), markup=False)
@@ -194,7 +213,8 @@ class LiveSession:
         return self.writer.rows if self.writer is not None else 0
 
     def record(self, speed: float, duration: float | None, segment_s: float, layout: Layout,
-               viewer_scope: ViewerScope, loop: bool = False) -> bool:
+               viewer_scope: ViewerScope, loop: bool = False, view_image_rate: float = 0.0,
+               view_image_width: int = 640) -> bool:
         """Track every camera (video files replayed at speed, again and again with loop) until duration s of capture
         time (None: until stopped) into the recording, in segment_s files and streamed to the viewer the tool started
         (through its stdin, never waited for), and the offsets CSV; the cones on a line of the terminal. True when
@@ -209,7 +229,8 @@ class LiveSession:
             feed = ViewerFeed(self.viewer_process.stdin)
         self.recorder = Recorder(self.rig, self.rrd, viewer=feed, segment_s=segment_s, stale_s=self.stale_s,
                                  layout=layout.value, estimate_period_s=LIVE_ESTIMATE_PERIOD_S,
-                                 viewer_scope=viewer_scope.value, forward=[self.fox] if self.fox is not None else [])
+                                 viewer_scope=viewer_scope.value, forward=[self.fox] if self.fox is not None else [],
+                                 view_image_rate=view_image_rate, view_image_width=view_image_width)
         with OffsetsWriter(self.outputs.claim(self.out)) as self.writer:
             console.print(f"recording to {self.rrd.with_name(self.rrd.stem + '-*.rrd')} and {self.writer.path} "
                           f"(renamed {self.out.name} when the session ends)", markup=False, soft_wrap=True)

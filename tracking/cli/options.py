@@ -77,6 +77,8 @@ ChunkOption = Annotated[int, typer.Option(min=1, help="A chunk of a video starts
                                                       "frames after the previous chunk's start.")]
 # Options shared by `view` and `live`: the web viewer.
 WEB_PORT_DEFAULT = 9090  # viewer.playback.WEB_PORT
+VIEW_IMAGE_RATE_DEFAULT = 2.0  # viewer.session.VIEW_IMAGE_RATE_HZ (not imported: the CLI starts without rerun)
+VIEW_IMAGE_WIDTH_DEFAULT = 640  # viewer.session.VIEW_IMAGE_WIDTH_PX
 WebPortOption = Annotated[int, typer.Option(help="Port of the web viewer's page (with --web).", min=1, max=65535)]
 
 
