@@ -106,9 +106,8 @@ def live(
 ) -> None:
     """Track every camera live, fuse them, record, and stream to the superintendent's view (and Foxglove)."""
     from tracking.rig import load_rig
-    from tracking.sources import byte_rate, check_sources
-    from viewer.playback import late_join_bytes, resolve_bind, start_live_viewer, web_viewer_url
-    from viewer.session import view_bytes_per_s
+    from tracking.sources import check_sources
+    from viewer.playback import resolve_bind, start_live_viewer, web_viewer_url
 
     if spawn and web:
         raise InputError("--spawn/--web", "choose one viewer")
@@ -117,10 +116,7 @@ def live(
     rrd, out = _session_files(the_rig, rrd, out)
     fox_address = _check_ports(bind, spawn, web, foxglove, port, grpc_port, web_port)
     warn_rig(the_rig)  # once the inputs are accepted: bad input stays the one line on stderr
-    rates = [byte_rate(the_rig, c) for c in the_rig.cameras]
-    if viewer_scope == ViewerScope.SUPERINTENDENT:
-        rates = [view_bytes_per_s(r, view_image_rate, view_image_width) for r in rates]
-    server_bytes = late_join_bytes(rates, viewer_scope.value) if web else None
+    server_bytes = _server_bytes(the_rig, viewer_scope, view_image_rate, view_image_width) if web else None
     viewer_process = start_live_viewer(web, bind, grpc_port, web_port, server_bytes) if spawn or web else None
     if web:
         console.print(f"web viewer: {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}")
@@ -145,6 +141,19 @@ def live(
         session.close()
     if not written:
         console.print(session.written(), markup=False)
+
+
+def _server_bytes(rig: Rig, scope: ViewerScope, image_rate: float, image_width: int) -> int:
+    """What the web server keeps for a page opened late (viewer.playback.late_join_bytes): the superintendent's
+    scope sends pictures at image_rate and image_width (0: the videos), "all" the videos."""
+    from tracking.sources import byte_rate
+    from viewer.playback import late_join_bytes
+    from viewer.session import view_bytes_per_s
+
+    rates = [byte_rate(rig, c) for c in rig.cameras]
+    if scope == ViewerScope.SUPERINTENDENT:
+        rates = [view_bytes_per_s(r, image_rate, image_width) for r in rates]
+    return late_join_bytes(rates, scope.value)
 
 
 def _session_files(rig: Rig, rrd: Path | None, out: Path | None) -> tuple[Path, Path]:
