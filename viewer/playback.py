@@ -227,10 +227,11 @@ def viewer_command(recording: Path, web: bool = False, address: str = "127.0.0.1
     return [rerun_binary(), str(recording), "--bind", address, "--port", port]
 
 
-def late_join_bytes(video_bytes_per_s: list[float], scope: str) -> int:
+def late_join_bytes(image_bytes_per_s: list[float], scope: str) -> int:
     """What a live web server keeps for a page opened late, bytes: LATE_JOIN_S of the viewer's stream, from each
-    camera's video rate (bytes/s, tracking.sources.byte_rate) and the scope's overhead per camera."""
-    rate = sum(video_bytes_per_s) + VIEW_OVERHEAD_BYTES_PER_S[scope] * len(video_bytes_per_s)
+    camera's images (bytes/s: its video, tracking.sources.byte_rate, or its pictures, viewer.session.view_bytes_per_s)
+    and the scope's overhead per camera."""
+    rate = sum(image_bytes_per_s) + VIEW_OVERHEAD_BYTES_PER_S[scope] * len(image_bytes_per_s)
     return max(MIN_SERVER_MEMORY_BYTES, int(LATE_JOIN_S * rate))
 
 

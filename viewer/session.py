@@ -82,13 +82,15 @@ VIEWER_SCOPES = ("superintendent", "all")  # what a live viewer of the superinte
 VIEW_IMAGE_RATE_HZ = 2.0  # live: the superintendent's scope sends each shown camera's picture this often, as a JPEG
 VIEW_IMAGE_WIDTH_PX = 640  # ... at most this wide: a 920x600 stream of 2.6 Mbit/s becomes 0.3 Mbit/s (20 kB a picture)
 # that a tablet on the vessel's Wi-Fi keeps up with; the figures keep their own rate, the recording every frame
-VIEW_PICTURE_BYTES = 25_000  # a 640 px wide JPEG of a marker scene at JPEG_QUALITY, with margin (20 kB measured)
+VIEW_PICTURE_BYTES = 25_000  # a VIEW_IMAGE_WIDTH_PX wide JPEG of a marker scene at JPEG_QUALITY, with margin
+# (the demo's 920x600 drone_A: 20 kB measured)
 
 
 def view_bytes_per_s(video_bytes_per_s: float, rate: float, width: int) -> float:
     """A camera's bytes a second in the viewer's own stream: its pictures at rate (Hz) and width (px), else
     (rate 0) its video."""
-    return video_bytes_per_s if rate <= 0 else min(video_bytes_per_s, rate * VIEW_PICTURE_BYTES * (width / 640) ** 2)
+    scaled = rate * VIEW_PICTURE_BYTES * (width / VIEW_IMAGE_WIDTH_PX) ** 2  # a picture's bytes go with its area
+    return video_bytes_per_s if rate <= 0 else min(video_bytes_per_s, scaled)
 
 
 class Compactor:

@@ -72,7 +72,7 @@ ScopeOption = Annotated[ViewerScope, typer.Option(help="What the viewer (--web, 
                                                        "falls behind on it).")]
 ViewImageRateOption = Annotated[float, typer.Option(help="Pictures a second of each camera the superintendent's scope "
                                                           "sends the viewer, as JPEGs (0: its video, every frame: "
-                                                          "~10 times the bytes).", min=0.0, max=100.0)]
+                                                          "about 8 times the bytes).", min=0.0, max=100.0)]
 ViewImageWidthOption = Annotated[int, typer.Option(help="Width, px, the superintendent's scope scales its pictures "
                                                          "down to.", min=64, max=8192)]
 GrpcPortOption = Annotated[int, typer.Option(help="Port of the viewer's gRPC server (--web, --spawn).", min=1,

@@ -284,9 +284,8 @@ def _linearisation_error(s: FilterState, cam: CameraState, rows: list[_Rows], K:
 
 def jolted(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray, time: float) -> bool:
     """Whether a placed camera's jacket corners (id -> (4, 2)) in its frame at a capture time say it moved beyond its
-    prior since its last frame:
-    the median of their corners' squared innovations (each over its own 2 × 2 innovation covariance) beyond
-    JOLT_CHI2_2. The median, so a rain-struck corner or marker does not count, while a camera that moved moves all."""
+    prior since its last frame: the median of their corners' squared innovations (corner_d2) beyond JOLT_CHI2_2.
+    The median, so a rain-struck corner or marker does not count, while a camera that moved moves all."""
     columns = list(range(cam.index, cam.index + 6))
     sigma2 = max(CORNER_NOISE_PX, cam.model_px) ** 2
     views = {m: s.views[(cam.name, m)] for m in corners if (cam.name, m) in s.views}
@@ -297,20 +296,23 @@ def jolted(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: 
     if not bound or float(np.median(np.concatenate(bound))) <= JOLT_CHI2_2 * sigma2:
         return False
     d2: list[np.ndarray] = []
-    for marker, z in corners.items():
-        v = s.views.get((cam.name, marker))
-        if v is None:
-            continue
+    for marker, v in views.items():
+        z = corners[marker]
         h, J = corner_jacobian(s, placed(cam), cam.index, marker, s.x, K, columns)
         idx = [*columns, *range(v.index, v.index + VIEW)]
         H = np.hstack([J, _EYE8])
         y = z.reshape(-1) - h - s.x[v.index:v.index + VIEW]
-        S = H @ s.P.take(idx, 0).take(idx, 1) @ H.T + sigma2 * _EYE8
-        S = S.reshape(4, 2, 4, 2)[np.arange(4), :, np.arange(4), :]  # (4, 2, 2): each corner's own block
-        det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
-        u, w = y[0::2], y[1::2]
-        d2.append((S[:, 1, 1] * u * u - (S[:, 0, 1] + S[:, 1, 0]) * u * w + S[:, 0, 0] * w * w) / det)
+        d2.append(corner_d2(H @ s.P.take(idx, 0).take(idx, 1) @ H.T + sigma2 * _EYE8, y))
     return bool(d2) and float(np.median(np.concatenate(d2))) > JOLT_CHI2_2
+
+
+def corner_d2(S: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(4,) each corner's yᵀ S⁻¹ y over its own 2 × 2 block of a marker's innovation covariance S (8, 8), innovation
+    y (8,)."""
+    S = S.reshape(4, 2, 4, 2)[np.arange(4), :, np.arange(4), :]  # (4, 2, 2)
+    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+    u, w = y[0::2], y[1::2]
+    return (S[:, 1, 1] * u * u - (S[:, 0, 1] + S[:, 1, 0]) * u * w + S[:, 0, 0] * w * w) / det
 
 
 def _corner_covariance(s: FilterState, cam: CameraState, J: np.ndarray, HPH: np.ndarray, y: np.ndarray,
@@ -321,10 +323,7 @@ def _corner_covariance(s: FilterState, cam: CameraState, J: np.ndarray, HPH: np.
     if topside and s.clock_sigma.get(cam.name):  # a clock known to σ_t: the topside seen up to σ_t early
         moved = J[:, :6] @ s.x[6:12] * s.clock_sigma[cam.name]  # or late, (8,) px along its motion
         R += np.outer(moved, moved)  # (cone_estimates adds what the cameras' clocks share)
-    S = (HPH + R).reshape(4, 2, 4, 2)[np.arange(4), :, np.arange(4), :]  # (4, 2, 2): each corner's own block
-    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
-    u, w = y[0::2], y[1::2]
-    d2 = (S[:, 1, 1] * u * u - (S[:, 0, 1] + S[:, 1, 0]) * u * w + S[:, 0, 0] * w * w) / det  # yᵀ S⁻¹ y per corner
+    d2 = corner_d2(HPH + R, y)
     for j in np.flatnonzero(d2 > CORNER_HUBER_CHI2):
         b = slice(2 * j, 2 * j + 2)
         R[b, b] *= d2[j] / CORNER_HUBER_CHI2

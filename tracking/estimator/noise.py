@@ -52,8 +52,8 @@ GAUSSIAN_MEDIAN_CHI2_1 = 0.4549  # median of a χ² variable with 1 degree of fr
 JOLT_CHI2_2 = 9.21  # a camera whose jacket corners' median squared innovation exceeds χ²(2 dof, 99 %) moved beyond its
 # prior since its last frame (a hand, a gust): it gets its mount's whole process noise back at once where its motion
 # level had lowered it, so its own jacket corners take the move up, not the topside (real webcams filming a board
-# turned by hand: post_optimization's live |e|max 7/31/26 -> 3/14/7 mm). Only a mount whose ceiling allows a move
-# within a frame ("moving") gains from it; a still fixed or vessel camera moved is placed again (TopsideFilter._jumped)
+# turned by hand: post_optimization's live |e|max 7/31/26 -> 3/14/7 mm). It acts on every mount whose level adapts:
+# procedure 1's stern (vessel) cameras jolt 35-86 times in 95 s of waves (docs/method.md: a camera jolted)
 PLACEMENT_GAIN = 25.0  # σ × 5 on the pose that first places a camera: it only linearises; the same frame's corners,
 # applied right after, carry its information (else counted twice)
 CORNER_GATE_CHI2 = 26.12  # 8 degrees of freedom (a marker's four corners), 99.9 %
