@@ -53,7 +53,7 @@ JOLT_CHI2_2 = 9.21  # a camera whose jacket corners' median squared innovation e
 # prior since its last frame (a hand, a gust): it gets its mount's whole process noise back at once where its motion
 # level had lowered it, so its own jacket corners take the move up, not the topside (real webcams filming a board
 # turned by hand: post_optimization's live |e|max 7/31/26 -> 3/14/7 mm). It acts on every mount whose level adapts:
-# procedure 1's stern (vessel) cameras jolt 35-86 times in 95 s of waves (docs/method.md: a camera jolted)
+# procedure 1's stern (vessel) cameras jolt 35-86 times in 100 s of waves (docs/method.md: a camera jolted)
 PLACEMENT_GAIN = 25.0  # σ × 5 on the pose that first places a camera: it only linearises; the same frame's corners,
 # applied right after, carry its information (else counted twice)
 CORNER_GATE_CHI2 = 26.12  # 8 degrees of freedom (a marker's four corners), 99.9 %
