@@ -12,6 +12,7 @@ from tracking.detection import MarkerDetection
 from tracking.estimate import WITHHELD_CLOCKS
 from tracking.estimator import TopsideFilter, fused_estimates, smoothed_estimates
 from tracking.estimator.noise import REPORT_WARMUP_S, VIEW_BIAS_TAU_S
+from tracking.estimator.process import PoseMotionLevel
 from tracking.geometry import rotation, rotvec
 from tracking.offsets import BodyObservation, PairOffset, body_geometry, observe_bodies
 from tracking.pose import Choice, estimate_pose, marker_object_points
@@ -314,6 +315,33 @@ def test_a_camera_gets_the_process_noise_its_images_show() -> None:
     assert rolling_scale > 10 * still_scale
     assert still_error < 0.5 * drone
     assert np.abs(still_cones).mean() < 0.01 and np.abs(rolling_cones).mean() < 0.01
+
+
+def turned_fits(rates: np.ndarray, fps: float, sigma: float, seed: int = 0) -> PoseMotionLevel:
+    """A PoseMotionLevel fed the rotations of a camera turning at rates (N, 3) rad/s, one frame each at fps, each
+    fit off by σ rad per axis (and saying so)."""
+    rng = np.random.default_rng(seed)
+    level, R = PoseMotionLevel(), np.eye(3)
+    for k, w in enumerate(rates):
+        R = rotation(w / fps) @ R
+        level.add(k / fps, rotation(rng.normal(0.0, sigma, 3)) @ R, sigma**2)
+    return level
+
+
+def test_a_cameras_turns_give_its_level_and_noise_alone_gives_none() -> None:
+    """White-noise angular acceleration of psd q read from fitted rotations (15 frames a second, 1 mrad fits): over 8
+    runs at least q and at most 3 q (the largest of three axes' medians); a board swung about one axis by hand at 1 Hz
+    (6 frames a second) read as a level; a still camera's noisy fits (a far marker's 10 mrad) read as nothing."""
+    q, fps = 0.05, 15.0
+    levels = []
+    for seed in range(8):  # one run's level, from 20 frames' overlapping samples, scatters by ×2
+        rates = np.cumsum(np.random.default_rng(seed).normal(0.0, np.sqrt(q / fps), (300, 3)), axis=0)
+        levels.append(turned_fits(rates, fps, 1e-3).level)
+    assert None not in levels and q < np.exp(np.mean(np.log(levels))) < 3.0 * q
+    t = np.arange(60) / 6.0
+    swung = turned_fits(np.outer(0.5 * np.cos(2 * np.pi * t), [0.0, 1.0, 0.0]), 6.0, 2e-3)
+    assert swung.level is not None and swung.level > 0.1
+    assert turned_fits(np.zeros((300, 3)), fps, 0.01).level is None
 
 
 def test_a_still_camera_jolted_takes_the_move_up_at_once() -> None:

@@ -140,7 +140,7 @@ class TopsideFilter(FilterState):
             o = BodyObservation(o.time, o.camera, o.jacket, None,
                                 {i: c for i, c in o.corners.items() if i in self.jacket_corners}, o.K)
         jacket = {i: z for i, z in o.corners.items() if i in self.jacket_corners}
-        self._measure_motion(cam, o.time, jacket, o.K)
+        self._measure_motion(cam, o.time, jacket, o.K, o.jacket)
         topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
         renew(self, [o])  # when predict was not given the frame
         used_jacket = corner_update(self, cam, jacket, o.K, False, o.time)  # the camera first, then the topside
@@ -185,14 +185,19 @@ class TopsideFilter(FilterState):
             cam.waiting = f"lost: its jacket corners were refused {REINIT_AFTER_REJECTS} frames in a row"
             self.reset_camera(cam)
 
-    def _measure_motion(self, cam: CameraState, time: float, jacket: dict[int, np.ndarray], K: np.ndarray) -> None:
-        """A frame's jacket corners into the camera's motion level; its process noise scaled to that level."""
+    def _measure_motion(self, cam: CameraState, time: float, jacket: dict[int, np.ndarray], K: np.ndarray,
+                        fit: BodyPose | None) -> None:
+        """A frame's jacket corners and jacket fit into the camera's motion levels; its process noise scaled to the
+        larger of them (its images' motion, its turns where measured)."""
         prior = self.tuning.motion(cam.mount)
         if not prior.adapts or not jacket:
             return
         cam.motion.add(time, jacket, float(K[0, 0] + K[1, 1]) / 2)
+        if fit is not None and fit.choice == Choice.UNIQUE:
+            cam.turns.add(time, fit.T_camera_body[:3, :3], float(np.trace(fit.covariance[:3, :3])) / 3)
         if cam.motion.level is not None:
-            cam.motion_scale = float(np.clip(cam.motion.level / prior.angular_accel_psd, MOTION_FLOOR, 1.0))
+            level = max(cam.motion.level, cam.turns.level or 0.0)
+            cam.motion_scale = float(np.clip(level / prior.angular_accel_psd, MOTION_FLOOR, 1.0))
 
     def _measure_scale(self, o: BodyObservation) -> None:
         """A frame's evidence of the markers' size: two markers of one body in it, and a surveyed camera's distance to

@@ -44,6 +44,10 @@ CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's var
 CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a drone's jitter and a vessel's
 # wave motion turn within a second or two
 MOTION_LAG_S = 1.0  # lag of the second differences of jacket-marker image positions that measure a camera's motion
+POSE_MOTION_LAG_S = 1.0 / 3.0  # lag of the second differences of a camera's fitted jacket rotation (PoseMotionLevel):
+# a hand turning a board turns within a second, which a 1 s lag averages away (caliscope's webcams: 0.02-0.1 rad²/s³
+# at 2 frames, 0.004-0.05 at 6; their jacket markers' images read 0.001-0.005)
+POSE_MOTION_SNR = 3.0  # ... a level counted only where it is this many times what the fits' own noise reads
 MOTION_SAMPLES = 60  # second differences (per marker and image axis) whose median gives the camera's motion level
 MOTION_MIN_SAMPLES = 12  # until then the mount's motion prior is used as it stands
 MOTION_UPDATE_EVERY = 5  # frames with new samples between two medians (the level changes over seconds)

@@ -4,7 +4,7 @@ Per body (the topside, each camera) the state holds a pose error and its rates. 
 the rate keeps a share a of itself: the topside keeps its speed (a = 1, b = dt), a camera's rates revert to zero
 within CAMERA_RATE_TAU_S. The states after the bodies (consider states, view biases) keep a share of themselves, the
 rest renewed with VIEW_BIAS_PX. A camera's process noise follows the motion its jacket markers' images show
-(CameraMotionLevel).
+(CameraMotionLevel), or its fitted jacket poses' turns where they are measured well enough (PoseMotionLevel).
 """
 
 from __future__ import annotations
@@ -21,9 +21,12 @@ from tracking.estimator.noise import (
     MOTION_MIN_SAMPLES,
     MOTION_SAMPLES,
     MOTION_UPDATE_EVERY,
+    POSE_MOTION_LAG_S,
+    POSE_MOTION_SNR,
     STATE,
     VIEW_BIAS_PX,
 )
+from tracking.geometry import rotvec
 
 
 def rate_decay(dt: float, tau: float) -> tuple[float, float]:
@@ -135,3 +138,55 @@ class CameraMotionLevel:
     def _nearest(times: list[float], t: float) -> int:
         k = bisect.bisect_left(times, t)
         return k if k == 0 or (k < len(times) and times[k] - t < t - times[k - 1]) else k - 1
+
+
+@dataclass
+class PoseMotionLevel:
+    """How fast a camera turns about its jacket markers, from its own jacket poses (T_camera_jacket of each frame's
+    body fit): what CameraMotionLevel cannot see when the camera orbits the markers (a board turned by hand before a
+    webcam, a drone circling), for the markers' image then stays put while their shape turns.
+
+    Per frame, the second divided difference a of the camera's turn over POSE_MOTION_LAG_S (its rotation increments
+    over the two lags, rad/s); as for CameraMotionLevel each of its three components squared × 3 / (2 Δ) estimates
+    the angular psd q, and the fits' own rotation variances σ² give what noise alone reads, 3 (σ₀² + 4 σ₁² + σ₂²) /
+    (2 Δ³).
+    The level, the largest axis's median of q over GAUSSIAN_MEDIAN_CHI2_1 less the noise's median (a board swung about
+    one axis is still when seen about the other two), counts only where it is
+    POSE_MOTION_SNR times the noise: a far camera's fits (a 1 m marker at 40 m: 10 mrad) read noise and nothing else.
+    """
+
+    lag_s: float = POSE_MOTION_LAG_S
+    poses: tuple[list[float], list[np.ndarray], list[float]] = field(default_factory=lambda: ([], [], []))  # times,
+    # R_camera_jacket (3, 3) and rotation variances (rad², per axis) of the last 2.5 lags
+    samples: deque = field(default_factory=lambda: deque(maxlen=MOTION_SAMPLES // 3))  # (q per camera axis,
+    # noise) estimates, rad²/s³
+    level: float | None = None  # angular acceleration psd, rad²/s³ (None until enough samples, or below the noise)
+    pending: int = 0
+
+    def add(self, time: float, R_camera_jacket: np.ndarray, rotation_var: float) -> None:
+        """One frame's jacket fit: its rotation (3, 3) and the mean variance of its rotation vector's axes, rad²."""
+        times, rotations, variances = self.poses
+        times.append(time)
+        rotations.append(R_camera_jacket)
+        variances.append(rotation_var)
+        old = bisect.bisect_left(times, time - 2.5 * self.lag_s)
+        if old:
+            del times[:old], rotations[:old], variances[:old]
+        if times[0] > time - 1.75 * self.lag_s:
+            return
+        i1, i0 = (CameraMotionLevel._nearest(times, time - k * self.lag_s) for k in (1, 2))
+        t0, t1 = times[i0], times[i1]
+        if not (t0 < t1 < time) or abs(t1 - (time - self.lag_s)) > 0.25 * self.lag_s:
+            return
+        R0, R1, R2 = rotations[i0], rotations[i1], R_camera_jacket
+        a = rotvec(R2 @ R1.T) / (time - t1) - rotvec(R1 @ R0.T) / (t1 - t0)
+        half = (time - t0) / 2
+        noise = 1.5 / half * (variances[i0] + 4 * variances[i1] + rotation_var) / half**2
+        self.samples.append((*(1.5 / half * a**2).tolist(), noise))
+        self.pending += 1
+        if self.pending >= MOTION_UPDATE_EVERY and 3 * len(self.samples) >= MOTION_MIN_SAMPLES:
+            medians = np.median(np.array(self.samples), axis=0)
+            noise = float(medians[3])
+            level = float(medians[:3].max()) / GAUSSIAN_MEDIAN_CHI2_1 - noise  # the axis it turns about most
+            self.level = level if level > POSE_MOTION_SNR * noise else None
+            self.pending = 0

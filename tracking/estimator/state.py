@@ -17,7 +17,7 @@ from threadpoolctl import threadpool_limits
 
 from tracking.estimator.hypotheses import Hypotheses
 from tracking.estimator.noise import STATE, VIEW, VIEW_BIAS_PX, CornerNoise, FilterTuning, prior_covariance
-from tracking.estimator.process import CameraMotionLevel
+from tracking.estimator.process import CameraMotionLevel, PoseMotionLevel
 from tracking.geometry import rotation, skew
 from tracking.offsets import body_geometry
 from tracking.pose import body_object_points
@@ -68,6 +68,7 @@ class CameraState:
     T_jacket_camera: np.ndarray | None = None  # (4, 4), None until a jacket view places the camera
     consecutive_rejects: int = 0
     motion: CameraMotionLevel = field(default_factory=lambda: CameraMotionLevel())
+    turns: PoseMotionLevel = field(default_factory=lambda: PoseMotionLevel())  # its turns about its jacket markers
     corner_noise: CornerNoise = field(default_factory=lambda: CornerNoise())  # its corners' σ, measured
     model_px: float = 0.0  # its calibration's RMS reprojection error, px (BodyObservation.model_px)
     motion_scale: float = 1.0  # share of its mount's process noise the camera gets (1 until its level is known)
