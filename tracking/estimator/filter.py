@@ -262,16 +262,18 @@ class TopsideFilter(FilterState):
         offsets = H @ x[:STATE]
         sds = np.sqrt(np.diagonal(covs, axis1=1, axis2=2)).tolist()  # (C, 3) σ per axis, and with exact clocks
         timed_sds = sds if timeds is covs else np.sqrt(np.diagonal(timeds, axis1=1, axis2=2)).tolist()
+        mismatch = self.scale.mismatch  # every offset scaled: once a time, not once a cone
         for cone, offset, cov, sd, timed_sd in zip(names, offsets, covs, sds, timed_sds, strict=True):
-            withheld = self._withheld(float(offset[2]), sd, timed_sd, limit)
+            withheld = self._withheld(float(offset[2]), sd, timed_sd, limit, mismatch)
             offset = np.full(3, np.nan) if withheld else offset
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))
         return out
 
-    def _withheld(self, dz: float, sd: list[float], timed_sd: list[float], limit: float) -> str:
-        """Why a cone's offset of Δz dz and σ per axis sd (3,) is not shown (empty: it is): a rig error, or σ beyond
-        limit (the clocks' fault when its σ with exact clocks, timed_sd, would have been shown)."""
-        if self.scale.mismatch:  # every offset scaled
+    def _withheld(self, dz: float, sd: list[float], timed_sd: list[float], limit: float, mismatch: bool) -> str:
+        """Why a cone's offset of Δz dz and σ per axis sd (3,) is not shown (empty: it is): a rig error (mismatch: the
+        markers are not the size the rig states), or σ beyond limit (the clocks' fault when its σ with exact clocks,
+        timed_sd, would have been shown)."""
+        if mismatch:  # every offset scaled
             return WITHHELD_SCALE
         if below_cones(dz, sd[2]):  # no set-down can be there
             self.below = (self.below[0] + 1, min(self.below[1], dz))
