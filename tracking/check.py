@@ -372,13 +372,16 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
         has_markers = any(m.cone == cone and m.body == "topside" for m in rig.markers)
         cameras = tuple(sorted({s.camera for s in topside if by_id[s.marker].cone == cone})) if has_markers \
             else everyone
-        mm = "no estimate" if not np.isfinite(worst) else f"σ {worst * 1000:.0f} mm"
+        mm = f"σ {worst * 1000:.0f} mm"
         source = (f"seen by {', '.join(cameras)}" if has_markers and cameras else
                   f"no camera sees a topside marker at {cone}" if has_markers else
                   f"no marker at {cone}: from the topside's rigid pose through {', '.join(everyone) or 'no camera'}")
         depth = depth_reason(e, cameras, rig, cone) if e is not None and worst > READY_MAX_SIGMA_M else ""
-        if worst > REPORT_MAX_SIGMA_M:
+        if not np.isfinite(worst):
             verdict: Verdict = "weak" if has_markers and cameras else "blind"
+            reason = f"{source}; the filter gave no estimate in these seconds: it would show NO DATA{depth}"
+        elif worst > REPORT_MAX_SIGMA_M:
+            verdict = "weak" if has_markers and cameras else "blind"
             reason = (f"{source}; {mm} is above the {REPORT_MAX_SIGMA_M * 1000:.0f} mm report limit: it would show "
                       f"NO DATA{depth}")
         elif worst > READY_MAX_SIGMA_M:
