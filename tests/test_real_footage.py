@@ -64,3 +64,20 @@ def test_the_recording_holds_the_real_images_corners_and_offsets(run: tuple[pd.D
     for cam in ("cam_0", "cam_1", "cam_2", "cam_3"):
         assert f"/world/cameras/{cam}/image" in entities
     assert {"/offsets/dx/A/estimate", "/uncertainty/dx/A"} <= set(entities)
+
+
+def test_check_names_the_mount_a_camera_filming_a_turned_board_needs(shared_data: Path, tmp_path: Path) -> None:
+    """The webcams declared `fixed` while the board turns before them: `check` measures their motion and names the
+    mount it needs (the filter follows the measured motion either way)."""
+    if not (shared_data / "caliscope").is_dir():
+        pytest.skip("the caliscope footage is not in ../shared/data")
+    text = (SESSION / "rig.yaml").read_text().replace("mount: moving", "mount: fixed")
+    for relative in ("calibration/", "times/", "../../../../shared/"):
+        text = text.replace(f" {relative}", f" {(SESSION / relative).resolve()}/")
+    rig = tmp_path / "rig.yaml"
+    rig.write_text(text)
+    proc = subprocess.run([sys.executable, "-m", "tracking.cli", "check", "--rig", str(rig), "--seconds", "9"],
+                          capture_output=True, text=True, timeout=300)
+    named = [line for line in (proc.stdout + proc.stderr).splitlines() if "mount: fixed allows" in line]
+    assert proc.returncode == 1 and len(named) >= 3, proc.stdout + proc.stderr
+    assert all(line.endswith("mount: moving") for line in named)

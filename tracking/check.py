@@ -54,7 +54,7 @@ from tracking.disagreements import (
 from tracking.errors import InputError
 from tracking.estimate import WITHHELD_BELOW, ConeEstimate
 from tracking.estimator import TopsideFilter, cone_points, filter_frame, point_offset_matrix
-from tracking.estimator.noise import REPORT_MAX_SIGMA_M, STATE
+from tracking.estimator.noise import MOUNT_MISMATCH, REPORT_MAX_SIGMA_M, STATE
 from tracking.estimator.state import topside_pose
 from tracking.images import Frame, VideoHealth
 from tracking.offsets import BodyObservation, PairOffset
@@ -152,6 +152,7 @@ class CameraCheck:
     first_frame: Frame | None = None  # its first frame (for the recording)
     model: CameraModel | None = None  # its calibration (sized by the first frame when the file gave no size)
     unplaced: str = ""  # why the fusion filter never placed it (tracking.estimator CameraState.waiting); empty: placed
+    moves: str = ""  # its mount, where its images show it moving far more than the mount allows: the mount it needs
 
     @property
     def problems(self) -> list[str]:
@@ -161,6 +162,8 @@ class CameraCheck:
             out.append(f"{self.camera}: sees no marker of the rig in {self.clock.frames} frames")
         elif self.unplaced:
             out.append(f"{self.camera}: never placed, so none of its frames is used: {self.unplaced}")
+        if self.moves:
+            out.append(f"{self.camera}: {self.moves}")
         if self.survey_conflict:
             out.append(f"{self.camera}: its surveyed position is {self.survey_m:.2f} m from where its markers place "
                        "it, beyond the survey's σ (position or position_sigma wrong?); not used")
@@ -416,6 +419,19 @@ def depth_reason(e: ConeEstimate, cameras: tuple[str, ...], rig: Rig, cone: str)
             "measure that axis")
 
 
+def mount_mismatch(kf: TopsideFilter, name: str) -> str:
+    """What a camera's measured motion says of its rig mount (empty: nothing): a level MOUNT_MISMATCH times its
+    mount's prior, and the first mount whose prior holds it (the filter follows the level either way)."""
+    cam = kf.cameras[name]
+    prior = kf.tuning.motion(cam.mount).angular_accel_psd
+    if cam.level is None or cam.level <= MOUNT_MISMATCH * prior:
+        return ""
+    fits = [m.mount for m in sorted(kf.tuning.camera_motion, key=lambda m: m.angular_accel_psd)
+            if m.angular_accel_psd >= cam.level]
+    return (f"mount: {cam.mount} allows turns of {prior:.0e} rad²/s³, its images show {cam.level:.0e} (it, or what it "
+            f"films, moves): mount: {fits[0] if fits else 'moving'}")
+
+
 def check_rig(rig: Rig, seconds: float = DEFAULT_SECONDS, refinement: Refinement = DEFAULT_REFINEMENT,
               on_frame: Callable[[], None] | None = None) -> CheckReport:
     """Check a rig against the first `seconds` of each of its cameras (see the module); on_frame is called after each
@@ -446,7 +462,7 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
         unplaced = kf.cameras[name].waiting if kf.cameras[name].T_jacket_camera is None else ""
         cameras.append(CameraCheck(name, clock, tuple(seen), dict(unknown), T_jacket_camera, T_jacket_markers,
                                    survey_m, name in kf.survey_conflicts, run.first_frame, run.tracker.camera,
-                                   unplaced))
+                                   unplaced, mount_mismatch(kf, name)))
         disagreements += relative_disagreements(rig, name, run.results, run.tracker.camera)
         disagreements += tilt_disagreements(rig, name, run.results)
     points = cone_points(rig)

@@ -24,6 +24,7 @@ from tracking.estimator.noise import (
     GATE_CHI2,
     MEASUREMENT_FLOOR_M,
     MOTION_FLOOR,
+    MOTION_LEVEL_MAX,
     REINIT_AFTER_REJECTS,
     REPORT_MAX_SIGMA_M,
     REPORT_WARMUP_S,
@@ -193,11 +194,12 @@ class TopsideFilter(FilterState):
         if not prior.adapts or not jacket:
             return
         cam.motion.add(time, jacket, float(K[0, 0] + K[1, 1]) / 2)
-        if fit is not None and fit.choice == Choice.UNIQUE:
+        if fit is not None and fit.choice == Choice.UNIQUE and len(fit.marker_ids) >= 2:  # a lone far marker's
+            # rotation covariance misses the biases of a view off its normal (as in _jumped)
             cam.turns.add(time, fit.T_camera_body[:3, :3], float(np.trace(fit.covariance[:3, :3])) / 3)
-        if cam.motion.level is not None:
-            level = max(cam.motion.level, cam.turns.level or 0.0)
-            cam.motion_scale = float(np.clip(level / prior.angular_accel_psd, MOTION_FLOOR, 1.0))
+        if cam.level is not None:  # the mount is a prior: what the camera's images show decides, up to the brisk
+            cam.motion_scale = float(np.clip(cam.level / prior.angular_accel_psd, MOTION_FLOOR,
+                                             max(1.0, MOTION_LEVEL_MAX / prior.angular_accel_psd)))
 
     def _measure_scale(self, o: BodyObservation) -> None:
         """A frame's evidence of the markers' size: two markers of one body in it, and a surveyed camera's distance to

@@ -52,6 +52,11 @@ MOTION_SAMPLES = 60  # second differences (per marker and image axis) whose medi
 MOTION_MIN_SAMPLES = 12  # until then the mount's motion prior is used as it stands
 MOTION_UPDATE_EVERY = 5  # frames with new samples between two medians (the level changes over seconds)
 MOTION_FLOOR = 1e-4  # the least share of its mount's process noise a camera keeps
+MOTION_LEVEL_MAX = 10.0  # rad²/s³, the most a camera's measured level raises its process noise to (the brisk mount's):
+# a mount is a prior, not a limit (caliscope's webcams declared `fixed` while the board turned before them: live
+# 62-78 % within 2σ, up to 27 % beyond 3σ, |e|max 30 mm when the level could not exceed the mount; 84-95 %, 14 mm when
+# it could)
+MOUNT_MISMATCH = 100.0  # `check` names a camera whose level exceeds its mount's prior this many times
 GAUSSIAN_MEDIAN_CHI2_1 = 0.4549  # median of a χ² variable with 1 degree of freedom: variance from a median of squares
 JOLT_CHI2_2 = 9.21  # a camera whose jacket corners' median squared innovation exceeds χ²(2 dof, 99 %) moved beyond its
 # prior since its last frame (a hand, a gust): it gets its mount's whole process noise back at once where its motion

@@ -76,6 +76,12 @@ class CameraState:
     waiting: str = "no frame of it yet"  # why it is not placed (empty once placed)
     placed_at: float | None = None  # capture time of its (last) placement, s
 
+    @property
+    def level(self) -> float | None:
+        """How much the camera moves, rad²/s³: the larger of its images' level and its turns' (None until the images'
+        is measured)."""
+        return None if self.motion.level is None else max(self.motion.level, self.turns.level or 0.0)
+
 
 
 def cone_points(rig: Rig) -> dict[str, np.ndarray]:
