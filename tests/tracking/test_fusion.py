@@ -791,3 +791,26 @@ def test_the_corners_analytic_jacobian_is_their_derivative() -> None:
             assert np.allclose(J[:, j], numeric, rtol=1e-5, atol=1e-3), (marker, k, J[:, j], numeric)
         if marker in kf.jacket_corners:
             assert not J[:, :6].any()  # a jacket marker does not move with the topside
+
+
+def test_the_cameras_poses_an_estimate_holds_are_those_of_its_time() -> None:
+    """An estimate's camera poses are taken when read, from the state of its time: later frames, which move the
+    cameras' pose errors and nominals, do not change them."""
+    the_rig = camera_rig()
+    kf = TopsideFilter(the_rig)
+    obs = observations(the_rig, 3.0)
+    held: list[tuple[object, dict[str, np.ndarray]]] = []
+    for k, o in enumerate(obs):
+        kf.predict(o.time)
+        kf.update(o)
+        if k % 20 == 10:
+            estimate = kf.cone_estimates()[0]
+            assert estimate.T_jacket_cameras is not None
+            held.append((estimate.T_jacket_cameras, {name: kf.camera_pose(cam) for name, cam in kf.cameras.items()
+                                                     if cam.T_jacket_camera is not None}))
+    assert len(held) > 5 and all(now for _, now in held)
+    for poses, then in held:
+        assert sorted(poses) == sorted(then)
+        assert all(np.array_equal(poses[name], T) for name, T in then.items())
+    first, last = held[0][1], held[-1][1]
+    assert any(not np.array_equal(first[name], last[name]) for name in first if name in last)  # the poses did move

@@ -9,6 +9,7 @@ import json
 import subprocess
 import sys
 from collections import Counter
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +46,7 @@ def canon(o: object) -> object:
         return type(o).__name__, tuple((f.name, canon(getattr(o, f.name))) for f in dataclasses.fields(o))
     if isinstance(o, np.ndarray):
         return o.dtype.str, o.shape, o.tobytes()
-    if isinstance(o, dict):
+    if isinstance(o, Mapping):  # dicts, and the filter's camera poses (taken when read)
         return tuple(sorted((repr(k), canon(v)) for k, v in o.items()))
     if isinstance(o, list | tuple):
         return tuple(canon(x) for x in o)

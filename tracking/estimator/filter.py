@@ -38,7 +38,7 @@ from tracking.estimator.noise import (
 )
 from tracking.estimator.placement import camera_covariance, place_camera, place_topside
 from tracking.estimator.process import Transition, rate_decay
-from tracking.estimator.state import CameraState, FilterState
+from tracking.estimator.state import CameraPoses, CameraState, FilterState
 from tracking.geometry import inverse, numeric_jacobian, pose_params, pose_residual, rotation
 from tracking.offsets import BodyObservation
 from tracking.pose import BodyPose, Choice
@@ -245,8 +245,9 @@ class TopsideFilter(FilterState):
         exceeds REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_SIDES of a marker side while warming (default: whether the
         filter is now); from the current state, with the placed cameras' poses (a past state's are relative to
         nominals since moved)."""
-        poses = None if x is not None else {name: self.camera_pose(cam) for name, cam in self.cameras.items()
-                                            if cam.T_jacket_camera is not None}
+        poses = None if x is not None else CameraPoses(
+            {name: (cam.T_jacket_camera, cam.index) for name, cam in self.cameras.items()
+             if cam.T_jacket_camera is not None}, self.x[:self.body_size].copy())
         x = self.x if x is None else x
         P = self.P if P is None else P
         time = (self.time if time is None else time) or 0.0

@@ -19,6 +19,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg.lapack import dgesv
 
 from tracking.estimator.noise import (
     CORNER_GATE_CHI2,
@@ -93,8 +94,9 @@ _UNIT = np.repeat(np.eye(3)[:, None, :], 4, axis=1)  # (3, 4, 3) ∂(corner + δ
 def corner_jacobian(s: FilterState, nominal: np.ndarray, index: int, marker: int, x: np.ndarray, K: np.ndarray,
                     columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
     """A marker's corners predicted from a state x (n,) as predict_corners, (8,) ideal pixels, and their (8, C)
-    Jacobian with respect to the state's entries at columns (C,): the topside's (0-5), the camera's (from index) and
-    the marker's consider states, analytic (each rotation through OpenCV's Rodrigues Jacobian); zero elsewhere."""
+    Jacobian with respect to the state's entries at columns (C,), in runs of six from a block's first: the topside's
+    (0-5), the camera's (from index) and the marker's consider states, analytic (each rotation through OpenCV's
+    Rodrigues Jacobian); zero elsewhere."""
     R_err, dR_err = rotation_jacobian_of(x[index:index + 3])
     R_n = nominal[:3, :3]
     R_c = R_err @ R_n  # T_jacket_camera's rotation: a corner P (jacket frame) is at pc = R_cᵀ (P - t_c)
@@ -126,11 +128,11 @@ def corner_jacobian(s: FilterState, nominal: np.ndarray, index: int, marker: int
     h = uv[:, :2] / uv[:, 2:3]
     A = (K[None, :2, :] - h[:, :, None] * K[None, 2:3, :]) / uv[:, 2, None, None]  # (4, 2, 3) ∂pixel / ∂pc
     full = (A @ D.transpose(1, 2, 0)).reshape(8, -1)  # (8, 6 B + 6)
-    where = {first + k: 6 * b + k for b, first in enumerate(firsts) for k in range(6)}
     J = np.zeros((8, len(columns)))
-    for j, k in enumerate(columns):
-        if k in where:
-            J[:, j] = full[:, where[k]]
+    for b, first in enumerate(firsts):  # columns come in runs of six, a block's states
+        if first in columns:
+            j = columns.index(first)
+            J[:, j:j + 6] = full[:, 6 * b:6 * b + 6]
     return h.reshape(-1), J
 
 
@@ -155,12 +157,14 @@ def renew(s: FilterState, frame: list[BodyObservation]) -> np.ndarray:
     for o in frame:
         for v, share in _renewed(s, o):
             keep[v.index - nb:v.index - nb + VIEW] = share
-    if (keep < 1.0).any():  # as Transition.covariance does for the views, in place: predict and apply leave
-        s.x[nb:] *= keep  # arrays that nothing else holds
-        s.P[nb:, :] *= keep[:, None]
-        s.P[:, nb:] *= keep
-        d = np.arange(nb, s.size)
-        s.P[d, d] += (1.0 - keep**2) * VIEW_BIAS_PX**2
+    d = np.flatnonzero(keep < 1.0)
+    if d.size:  # as Transition.covariance does for the views, in place (predict and apply leave arrays that nothing
+        k = keep[d]  # else holds), on the renewed views' rows and columns alone (the rest keep all)
+        d += nb
+        s.x[d] *= k
+        s.P[d, :] *= k[:, None]
+        s.P[:, d] *= k
+        s.P[d, d] += (1.0 - k**2) * VIEW_BIAS_PX**2
     return keep
 
 
@@ -180,7 +184,8 @@ def _renewed(s: FilterState, o: BodyObservation) -> list[tuple[ViewBias, float]]
         if T_camera_jacket is None:
             T_camera_jacket = inverse(camera_pose(cam.T_jacket_camera, cam.index, s.x))
         h = predict_corners(s, cam.T_jacket_camera, cam.index, marker, s.x, o.K, T_camera_jacket)
-        travel = float(np.linalg.norm((h - v.corners).reshape(4, 2), axis=1).mean())
+        shift = (h - v.corners).reshape(4, 2)
+        travel = float(np.sqrt((shift * shift).sum(axis=1)).sum()) / 4  # mean of the corners' shifts, px
         by_travel, by_time = np.exp(-travel / VIEW_BIAS_RENEW_PX), np.exp(-(o.time - v.time) / VIEW_BIAS_TAU_S)
         v.corners, v.time = h, o.time
         out.append((v, float(max(by_travel, by_time))))
@@ -204,7 +209,7 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
     rows: list[_Rows] = []
     for marker, z in sorted(corners.items()):
         r = _rows(s, cam, marker, z, K, columns, views[marker], x0, x0, P0, topside)
-        if float(r.y @ np.linalg.solve(r.HPH + r.R, r.y)) > CORNER_GATE_CHI2:
+        if float(r.y @ dgesv(r.HPH + r.R, r.y)[2]) > CORNER_GATE_CHI2:  # LAPACK's solve, without numpy's checks
             s.rejected += 1
             continue
         rows.append(r)
@@ -214,7 +219,7 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
     for iteration in range(CORNER_ITERATIONS):
         s.x, s.P = x0, P0
         H, union = _apply_rows(s, rows)
-        step = float(np.max(np.abs(H @ (s.x[union] - xi[union]))))  # the update's largest corner travel, px
+        step = float(np.abs(H @ (s.x[union] - xi[union])).max())  # the update's largest corner travel, px
         if iteration + 1 == CORNER_ITERATIONS or step**2 < 0.1 * LINEARISATION_TOL_PX * K[0, 0] or \
                 _linearisation_error(s, cam, rows, K) <= LINEARISATION_TOL_PX:
             break  # a projection's second-order term is about (its first-order step)² / f: below the tolerance
@@ -248,7 +253,7 @@ def _rows(s: FilterState, cam: CameraState, marker: int, z: np.ndarray, K: np.nd
     cols = columns if i is None else [*columns, *range(i, i + 6)]
     h, J = corner_jacobian(s, placed(cam), cam.index, marker, x, K, cols)
     idx = [*cols, *range(v, v + VIEW)]
-    H = np.hstack([J, _EYE8])  # (8, |idx|)
+    H = np.concatenate((J, _EYE8), axis=1)  # (8, |idx|)
     y = z.reshape(-1) - h - x[v:v + VIEW]
     if x is not x0:
         y = y + H @ (x[idx] - x0[idx])
@@ -300,7 +305,7 @@ def jolted(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: 
         z = corners[marker]
         h, J = corner_jacobian(s, placed(cam), cam.index, marker, s.x, K, columns)
         idx = [*columns, *range(v.index, v.index + VIEW)]
-        H = np.hstack([J, _EYE8])
+        H = np.concatenate((J, _EYE8), axis=1)
         y = z.reshape(-1) - h - s.x[v.index:v.index + VIEW]
         d2.append(corner_d2(H @ s.P.take(idx, 0).take(idx, 1) @ H.T + sigma2 * _EYE8, y))
     return bool(d2) and _median(np.concatenate(d2)) > JOLT_CHI2_2
@@ -316,10 +321,10 @@ def _median(values: np.ndarray) -> float:
 def corner_d2(S: np.ndarray, y: np.ndarray) -> np.ndarray:
     """(4,) each corner's yᵀ S⁻¹ y over its own 2 × 2 block of a marker's innovation covariance S (8, 8), innovation
     y (8,)."""
-    S = S.reshape(4, 2, 4, 2)[np.arange(4), :, np.arange(4), :]  # (4, 2, 2)
-    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+    a, b = S[0::2, 0::2].diagonal(), S[0::2, 1::2].diagonal()  # (4,) each: the corners' blocks [[a, b], [c, d]]
+    c, d = S[1::2, 0::2].diagonal(), S[1::2, 1::2].diagonal()
     u, w = y[0::2], y[1::2]
-    return (S[:, 1, 1] * u * u - (S[:, 0, 1] + S[:, 1, 0]) * u * w + S[:, 0, 0] * w * w) / det
+    return (d * u * u - (b + c) * u * w + a * w * w) / (a * d - b * c)
 
 
 def _corner_covariance(s: FilterState, cam: CameraState, J: np.ndarray, HPH: np.ndarray, y: np.ndarray,

@@ -49,10 +49,13 @@ def _body_rows(M: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _body_columns(M: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
-    """M Fᵀ in place for a C-ordered M (k, n), F as in _body_rows."""
-    cols = M[:, :a.size * 2].reshape(len(M), len(a), 2, 6)  # a view: each row's first 12 B entries are contiguous
-    cols[:, :, 0] += cols[:, :, 1] * b[None]
-    cols[:, :, 1] *= a[None]
+    """M Fᵀ in place for M (k, n), F as in _body_rows: F on the first 12 B columns taken as rows (contiguous, which
+    costs less than the strided columns in place)."""
+    block = M[:, :a.size * 2].T.copy()  # (12 B, k)
+    rows = block.reshape(len(a), 2, 6, -1)
+    rows[:, 0] += b[:, :, None] * rows[:, 1]
+    rows[:, 1] *= a[:, :, None]
+    M[:, :a.size * 2] = block.T
 
 
 @dataclass(frozen=True)

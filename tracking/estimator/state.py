@@ -9,6 +9,7 @@ then its rates); the markers' survey errors as consider states (ConsiderStates);
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -131,6 +132,28 @@ def camera_pose(nominal: np.ndarray, index: int, x: np.ndarray) -> np.ndarray:
     T[:3, :3] = rotation(x[index:index + 3]) @ nominal[:3, :3]
     T[:3, 3] = nominal[:3, 3] + x[index + 3:index + 6]
     return T
+
+
+class CameraPoses(Mapping[str, np.ndarray]):
+    """T_jacket_camera (4, 4) of the placed cameras in one state, each taken when first read: the filter gives them
+    with every frame's estimates, and few readers (the recording's frusta, check) look at them."""
+
+    def __init__(self, nominals: dict[str, tuple[np.ndarray, int]], x: np.ndarray) -> None:
+        self._nominals = nominals  # camera -> nominal T_jacket_camera (4, 4) (never written in place) and index
+        self._x = x  # (n,) the state's bodies, a copy
+        self._poses: dict[str, np.ndarray] = {}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._poses:
+            nominal, index = self._nominals[name]
+            self._poses[name] = camera_pose(nominal, index, self._x)
+        return self._poses[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._nominals)
+
+    def __len__(self) -> int:
+        return len(self._nominals)
 
 
 def topside_pose(x: np.ndarray) -> np.ndarray:
