@@ -1,0 +1,121 @@
+"""A caliscope session as a rig (tracking/caliscope.py): the two shared sessions, and the layouts of caliscope's
+other versions (config.toml's tables, port_N videos, frame_time_history.csv) made from them."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import av
+import numpy as np
+import pandas as pd
+import pytest
+
+from tracking.caliscope import read_board, read_session, write_session
+from tracking.errors import InputError
+from tracking.frame_times import read_frame_times
+from tracking.rig import load_rig
+
+
+@pytest.fixture()
+def caliscope(shared_data: Path) -> Path:
+    folder = shared_data / "caliscope"
+    if not folder.is_dir():
+        pytest.skip("the caliscope footage is not in ../shared/data")
+    return folder
+
+
+def video_frames(path: Path) -> int:
+    with av.open(str(path)) as container:
+        return sum(1 for _ in container.decode(video=0))
+
+
+def test_a_sessions_frames_count_from_its_videos_first(caliscope: Path, tmp_path: Path) -> None:
+    """charuco_calibration's timestamps.csv numbers its frames 26-136 (cut from a longer recording); its videos hold
+    111 frames from 0: the times go to frames 0-110, each camera's in sync_index order."""
+    session = read_session(caliscope / "charuco_calibration")
+    rig = load_rig(write_session(session, tmp_path))
+    assert [c.name for c in rig.cameras] == ["cam_0", "cam_1", "cam_2", "cam_3"] and not session.left_out
+    source = pd.read_csv(caliscope / "charuco_calibration" / "calibration" / "extrinsic" / "timestamps.csv")
+    assert source["frame_index"].min() == 26
+    for cam in rig.cameras:
+        times = read_frame_times(rig.resolve(cam.times))
+        assert len(times) == video_frames(rig.resolve(cam.source)) == 111 and np.isfinite(times).all()
+        rows = source[source["cam_id"] == int(cam.name[-1])].sort_values("sync_index")
+        assert np.allclose(times, rows["frame_time"] - source["frame_time"].min(), atol=1e-6)
+    assert rig.marker_size == pytest.approx(0.0405) and rig.inverted and rig.dictionary == "DICT_4X4_1000"
+    assert sorted(m.id for m in rig.markers if m.body == "topside") == [0, 1, 2, 3, 4]
+    truth = pd.read_csv(tmp_path / "truth.csv")
+    assert list(truth.columns) == ["time", "cone", "dx", "dy", "dz"] and (truth[["dx", "dy", "dz"]] == 0).all().all()
+
+
+def older_layout(caliscope: Path, tmp_path: Path) -> Path:
+    """post_optimization laid out as caliscope's older sessions are: one config.toml with [cam_N] tables (port) and
+    [charuco] (the misspelt square_size_overide_cm), port_N.mp4 videos, frame_time_history.csv (port,
+    frame_index); cam_1 turned by caliscope, cam_2 marked ignore."""
+    src = caliscope / "post_optimization"
+    out = tmp_path / "old"
+    (out / "calibration" / "extrinsic").mkdir(parents=True)
+    import tomllib
+
+    cameras = tomllib.loads((src / "camera_array.toml").read_text())["cameras"]
+    lines = ["fps_recording = 6", ""]
+    for key, cam in cameras.items():
+        lines += [f"[cam_{key}]", f"port = {key}", f"size = {cam['size']}", f"matrix = {cam['matrix']}",
+                  f"distortions = {cam['distortions']}", f"error = {cam['error']}",
+                  f"rotation_count = {1 if key == '1' else 0}", f"ignore = {'true' if key == '2' else 'false'}", ""]
+    lines += ["[charuco]", "columns = 4", "rows = 5", "board_height = 11.0", "board_width = 8.5",
+              'dictionary = "DICT_4X4_1000"', 'units = "inch"', "aruco_scale = 0.75", "square_size_overide_cm = 5.4",
+              "inverted = true"]
+    (out / "config.toml").write_text("\n".join(lines) + "\n")
+    times = pd.read_csv(src / "calibration" / "extrinsic" / "timestamps.csv").rename(columns={"cam_id": "port"})
+    times.insert(2, "frame_index", times["sync_index"] + 100)
+    times.to_csv(out / "calibration" / "extrinsic" / "frame_time_history.csv", index=False)
+    for k in range(4):
+        shutil.copy(src / "calibration" / "extrinsic" / f"cam_{k}.mp4",
+                    out / "calibration" / "extrinsic" / f"port_{k}.mp4")
+    return out
+
+
+def test_an_older_sessions_layout_makes_the_same_rig(caliscope: Path, tmp_path: Path) -> None:
+    new = load_rig(write_session(read_session(caliscope / "post_optimization"), tmp_path / "new"))
+    session = read_session(older_layout(caliscope, tmp_path))
+    old = load_rig(write_session(session, tmp_path / "from-old"))
+    assert [c.name for c in old.cameras] == ["cam_0", "cam_3"]
+    assert any("cam_1" in line and "turns its frames" in line for line in session.left_out)
+    assert any("cam_2" in line and "ignore" in line for line in session.left_out)
+    assert old.marker_size == new.marker_size and old.markers == new.markers and old.inverted == new.inverted
+    for name in ("cam_0", "cam_3"):
+        a = read_frame_times(tmp_path / "new" / "times" / f"{name}.csv")
+        b = read_frame_times(tmp_path / "from-old" / "times" / f"{name}.csv")
+        assert np.array_equal(a, b)
+        assert (tmp_path / "new" / "calibration" / f"{name}.yaml").read_text() == \
+            (tmp_path / "from-old" / "calibration" / f"{name}.yaml").read_text()
+
+
+def test_a_board_stated_by_its_size_gets_the_largest_square_that_fits() -> None:
+    board = read_board(Path("charuco.toml"), {"columns": 4, "rows": 5, "board_height": 11.0, "board_width": 8.5,
+                                              "units": "inch", "aruco_scale": 0.75, "dictionary": "DICT_4X4_50"})
+    assert board.square_m == pytest.approx(min(11.0 / 5, 8.5 / 4) / 0.393701 / 100)  # 5.4 cm: width-bound
+    assert board.marker_m == pytest.approx(0.75 * board.square_m) and not board.inverted
+    markers = board.markers()
+    assert len(markers) == 10 and abs(np.mean([m.center for m in markers], axis=0)).max() < 0.03  # about the centre
+
+
+@pytest.mark.parametrize(("table", "field"), [({"rows": 5}, "columns"), ({"columns": 4, "rows": 0}, "rows"),
+                                              ({"columns": 4, "rows": 5, "dictionary": "DICT_9X9"}, "dictionary"),
+                                              ({"columns": 4, "rows": 5, "square_size_override_cm": 5,
+                                                "aruco_scale": 1.5}, "aruco_scale")])
+def test_a_bad_board_is_named(table: dict, field: str) -> None:
+    with pytest.raises(InputError) as info:
+        read_board(Path("charuco.toml"), table)
+    assert f"charuco.toml: {field}: " in str(info.value)
+
+
+def test_import_caliscope_refuses_a_folder_that_is_no_session_in_one_line(tmp_path: Path) -> None:
+    bad = subprocess.run([sys.executable, "-m", "tracking.cli", "import-caliscope", str(tmp_path), "-o",
+                          str(tmp_path / "x")], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "no charuco.toml" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()

@@ -1,0 +1,263 @@
+"""A caliscope session (github.com/mprib/caliscope: webcams filming a hand-held ChArUco board) as a rig with a truth.
+
+caliscope keeps a session's board in `charuco.toml` (or the `[charuco]` table of `config.toml`), its cameras'
+intrinsics in `camera_array.toml` (`[cameras.N]`) or `config.toml` (`[cam_N]`), its videos as `cam_N.mp4` or
+`port_N.mp4` in `calibration/extrinsic/` and every frame's capture time beside them in `timestamps.csv` (sync_index,
+cam_id, [frame_index,] frame_time) or `frame_time_history.csv` / `frame_timestamps.csv` (the same with `port`).
+
+The board is rigid, so it makes a mated pair whose truth needs no tracker: its first half of markers (by id) is the
+"topside", the rest the "jacket", both at one cone A at the board's centre, and the true offset is zero whatever the
+board does. Board frame (OpenCV's: x right, y down the printed face, z into it) to jacket frame: x to port = -board
+x, z up = -board y, the printed face looks astern (+y). Square and marker sizes follow caliscope: the override in cm
+where given, else the largest square that fits the stated board (inches or cm); markers `aruco_scale` of a square.
+
+Frames: a camera's rows in sync_index order are its video's frames; where frame_index is given it counts from the
+camera's first row (caliscope's test sessions are cut from longer recordings and keep the original numbers).
+Capture times are seconds after the session's first frame. Cameras caliscope marks `ignore`, or whose frames it turns
+(`rotation_count`, which the tracker does not do), are left out and said so.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pandas as pd
+
+from tracking.camera import CameraModel, save_camera
+from tracking.errors import InputError
+from tracking.outputs import write_text
+from tracking.rig import CameraEntry, Marker, Mount, Rig, save_rig
+
+CONE = "A"
+INCHES_PER_CM = 0.393701  # caliscope's own conversion of a board stated in inches
+TIMES_FILES = ("timestamps.csv", "frame_time_history.csv", "frame_timestamps.csv")  # newest name first
+CAMERA_COLUMNS = ("cam_id", "port")
+VIDEO_NAMES = ("cam_{}.mp4", "port_{}.mp4")
+MOUNT: Mount = "moving"  # the board turns before the cameras: each camera sees its "jacket" turn, as a camera that
+# moves would (a fixed mount's prior would hold the camera still against what its images show)
+
+
+@dataclass(frozen=True)
+class Board:
+    """A caliscope ChArUco board: squares across (columns) and down (rows), their side and the markers', m."""
+
+    columns: int
+    rows: int
+    square_m: float
+    marker_m: float
+    dictionary: str
+    inverted: bool = False
+    legacy: bool = False  # OpenCV's pattern before 4.6 (differs on boards with an even number of rows)
+
+    def opencv(self) -> cv2.aruco.CharucoBoard:
+        board = cv2.aruco.CharucoBoard((self.columns, self.rows), self.square_m, self.marker_m,
+                                       cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary)))
+        board.setLegacyPattern(self.legacy)
+        return board
+
+    def markers(self, topside_ids: set[int] | None = None) -> list[Marker]:
+        """The board's markers in the jacket frame, its centre at the origin; topside_ids (default: the first half by
+        id) on the topside, the rest on the jacket."""
+        b = self.opencv()
+        ids = [int(i) for i in np.asarray(b.getIds()).ravel()]
+        topside = set(sorted(ids)[:len(ids) // 2]) if topside_ids is None else topside_ids
+        width, height = self.square_m * self.columns, self.square_m * self.rows
+        out = []
+        for i, corners in zip(ids, b.getObjPoints(), strict=True):
+            bx, by = np.asarray(corners)[:, :2].mean(axis=0)
+            center = [round(float(-(bx - width / 2)), 6), 0.0, round(float(-(by - height / 2)), 6)]
+            out.append(Marker(id=i, body="topside" if i in topside else "jacket", cone=CONE, face="astern",
+                              center=center))
+        return out
+
+
+@dataclass(frozen=True)
+class SessionCamera:
+    """One camera of a session: its number (cam_id or port), intrinsics (3, 3), distortion (k1 k2 p1 p2 k3), picture
+    size, calibration RMS (px) and its video."""
+
+    number: int
+    K: np.ndarray
+    dist: np.ndarray
+    size: tuple[int, int]
+    rms: float | None
+    video: Path
+
+
+@dataclass
+class Session:
+    """What a caliscope session holds that the tracker needs."""
+
+    source: Path
+    board: Board
+    cameras: list[SessionCamera]
+    times: dict[int, pd.DataFrame]  # camera number -> frame, time (s after the session's first frame)
+    left_out: list[str] = field(default_factory=list)  # one line per camera left out, and why
+
+
+def _toml(path: Path) -> dict[str, Any]:
+    try:
+        return tomllib.loads(path.read_text())
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"cannot be read ({exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(path, f"not a TOML file ({exc})") from None
+
+
+def _number(path: Path, table: dict[str, Any], key: str, what: str, positive: bool = True) -> float:
+    value = table.get(key)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or \
+            (positive and value <= 0):
+        raise InputError(path, f"expected {what}, got {value!r}", key)
+    return float(value)
+
+
+def read_board(path: Path, table: dict[str, Any]) -> Board:
+    """The board of a charuco.toml (or config.toml's [charuco]) table read from path."""
+    columns = int(_number(path, table, "columns", "the number of squares across"))
+    rows = int(_number(path, table, "rows", "the number of squares down"))
+    dictionary = str(table.get("dictionary", "DICT_4X4_50"))
+    if not dictionary.startswith("DICT_") or not hasattr(cv2.aruco, dictionary):
+        raise InputError(path, f"expected an OpenCV dictionary name such as DICT_4X4_50, got {dictionary!r}",
+                         "dictionary")
+    override = table.get("square_size_override_cm", table.get("square_size_overide_cm"))
+    if override:
+        square = _number(path, {"square_size_override_cm": override}, "square_size_override_cm",
+                         "the square's side in cm") / 100
+    else:
+        height, width = (_number(path, table, k, f"the board's {k.removeprefix('board_')}")
+                         for k in ("board_height", "board_width"))
+        scale = 1 / INCHES_PER_CM if table.get("units", "cm") == "inch" else 1.0
+        square = min(height * scale / 100 / rows, width * scale / 100 / columns)
+    aruco_scale = _number(path, {"aruco_scale": table.get("aruco_scale", 0.75)}, "aruco_scale",
+                          "the marker's share of a square (0-1)")
+    if aruco_scale >= 1:
+        raise InputError(path, f"expected the marker's share of a square (0-1), got {aruco_scale}", "aruco_scale")
+    return Board(columns, rows, square, square * aruco_scale, dictionary, bool(table.get("inverted", False)),
+                 bool(table.get("legacy_pattern", False)))
+
+
+def _camera_tables(folder: Path) -> tuple[Path, dict[int, dict[str, Any]]]:
+    """The cameras' tables by number, from camera_array.toml or config.toml."""
+    array = folder / "camera_array.toml"
+    if array.is_file():
+        cameras = _toml(array).get("cameras", {})
+        return array, {int(t.get("cam_id", k)): t for k, t in cameras.items() if isinstance(t, dict)}
+    config = folder / "config.toml"
+    if config.is_file():
+        data = _toml(config)
+        return config, {int(t.get("port", k.removeprefix("cam_"))): t for k, t in data.items()
+                        if k.startswith("cam_") and isinstance(t, dict)}
+    raise InputError(folder, "no camera_array.toml or config.toml (expected a caliscope session folder)")
+
+
+def _board(folder: Path) -> Board:
+    charuco = folder / "charuco.toml"
+    if charuco.is_file():
+        return read_board(charuco, _toml(charuco))
+    config = folder / "config.toml"
+    if config.is_file() and isinstance(_toml(config).get("charuco"), dict):
+        return read_board(config, _toml(config)["charuco"])
+    raise InputError(folder, "no charuco.toml, nor a [charuco] table in config.toml (expected the session's board)")
+
+
+def read_times(videos: Path) -> tuple[Path, dict[int, pd.DataFrame]]:
+    """Each camera's frame, time table from the session's times file in the videos' folder."""
+    path = next((videos / name for name in TIMES_FILES if (videos / name).is_file()), None)
+    if path is None:
+        raise InputError(videos, f"no {' or '.join(TIMES_FILES)} (expected each frame's capture time)")
+    try:
+        df = pd.read_csv(path)
+    except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise InputError(path, f"not a CSV file ({' '.join(str(exc).split())})") from None
+    camera = next((c for c in CAMERA_COLUMNS if c in df.columns), None)
+    for column in ("sync_index", camera or CAMERA_COLUMNS[0], "frame_time"):
+        if column not in df.columns:
+            raise InputError(path, "missing (expected sync_index, cam_id or port, [frame_index,] frame_time)", column)
+    for column in ("sync_index", camera, "frame_time", *(["frame_index"] if "frame_index" in df.columns else [])):
+        values = pd.to_numeric(df[column], errors="coerce").to_numpy(dtype=float)
+        if not np.isfinite(values).all():
+            raise InputError(path, f"line {int(np.argmax(~np.isfinite(values))) + 2}: expected a number", column)
+    t0 = float(df["frame_time"].min())
+    out = {}
+    for number, rows in df.groupby(camera):
+        rows = rows.sort_values("sync_index", kind="stable")
+        if "frame_index" in rows:
+            frame = (rows["frame_index"] - rows["frame_index"].min()).to_numpy(dtype=int)
+        else:
+            frame = np.arange(len(rows))
+        out[int(number)] = pd.DataFrame({"frame": frame, "time": (rows["frame_time"] - t0).round(6).to_numpy()})
+    return path, out
+
+
+def _video(videos: Path, number: int) -> Path | None:
+    return next((videos / n.format(number) for n in VIDEO_NAMES if (videos / n.format(number)).is_file()), None)
+
+
+def read_session(folder: Path, videos: Path | None = None) -> Session:
+    """A caliscope session folder (its videos and times file in videos, default calibration/extrinsic/)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(folder, "not a folder (expected a caliscope session folder)")
+    videos = folder / "calibration" / "extrinsic" if videos is None else Path(videos)
+    board = _board(folder)
+    source, tables = _camera_tables(folder)
+    times_path, times = read_times(videos)
+    cameras, left_out = [], []
+    for number, table in sorted(tables.items()):
+        name = f"cam_{number}"
+        video = _video(videos, number)
+        if table.get("ignore"):
+            left_out.append(f"{name}: caliscope marks it ignore")
+        elif table.get("rotation_count", 0) % 4:
+            left_out.append(f"{name}: caliscope turns its frames by {90 * table['rotation_count']}°, which the "
+                            "tracker does not do")
+        elif table.get("matrix") is None or table.get("distortions") is None:
+            left_out.append(f"{name}: no intrinsics in {source.name} (calibrate it first)")
+        elif video is None:
+            left_out.append(f"{name}: no {' or '.join(n.format(number) for n in VIDEO_NAMES)} in {videos}")
+        elif number not in times:
+            left_out.append(f"{name}: no rows in {times_path.name}")
+        else:
+            K, dist = np.asarray(table["matrix"], dtype=float), np.asarray(table["distortions"], dtype=float).ravel()
+            size = table.get("size")
+            if K.shape != (3, 3) or not np.isfinite(K).all() or not np.isfinite(dist).all() or \
+                    not (isinstance(size, list) and len(size) == 2):
+                raise InputError(source, "expected matrix (3 × 3), distortions and size [width, height]", name)
+            rms = table.get("error")
+            cameras.append(SessionCamera(number, K, dist, (int(size[0]), int(size[1])),
+                                         float(rms) if isinstance(rms, int | float) else None, video))
+    if not cameras:
+        raise InputError(folder, "no camera can be used: " + "; ".join(left_out or ["none listed"]))
+    return Session(folder, board, cameras, times, left_out)
+
+
+def write_session(session: Session, out: Path, topside_ids: set[int] | None = None,
+                  mount: Mount = MOUNT) -> Path:
+    """Write out/rig.yaml, out/calibration/cam_N.yaml, out/times/cam_N.csv and out/truth.csv (the offset at cone A,
+    zero at every sync time); the rig's path. Each file is written whole or not at all."""
+    out = Path(out)
+    entries = []
+    for cam in session.cameras:
+        name = f"cam_{cam.number}"
+        save_camera(out / "calibration" / f"{name}.yaml", CameraModel(cam.K, cam.dist, *cam.size, rms=cam.rms))
+        write_text(out / "times" / f"{name}.csv", session.times[cam.number].to_csv(index=False))
+        entries.append(CameraEntry(name=name, calibration=f"calibration/{name}.yaml",
+                                   source=os.path.relpath(cam.video.resolve(), out.resolve()),
+                                   times=f"times/{name}.csv", mount=mount))
+    board = session.board
+    rig = Rig(name=f"caliscope-{session.source.resolve().name}", dictionary=board.dictionary,
+              inverted=board.inverted, marker_size=round(board.marker_m, 9), cones={CONE: [0.0, 0.0, 0.0]},
+              markers=board.markers(topside_ids), cameras=entries)
+    times = np.unique(np.concatenate([t["time"].to_numpy() for t in session.times.values()]))
+    truth = pd.DataFrame({"time": times, "cone": CONE, "dx": 0.0, "dy": 0.0, "dz": 0.0})
+    write_text(out / "truth.csv", truth.to_csv(index=False))
+    save_rig(out / "rig.yaml", rig)
+    return out / "rig.yaml"
