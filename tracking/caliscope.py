@@ -13,8 +13,8 @@ where given, else the largest square that fits the stated board (inches or cm); 
 
 Frames: a camera's rows in sync_index order are its video's frames; where frame_index is given it counts from the
 camera's first row (caliscope's test sessions are cut from longer recordings and keep the original numbers).
-Capture times are seconds after the session's first frame. Cameras caliscope marks `ignore`, or whose frames it turns
-(`rotation_count`, which the tracker does not do), are left out and said so.
+Capture times are seconds after the session's first frame. Cameras caliscope marks `ignore`, whose frames it turns
+(`rotation_count`) or calibrates as fisheye, neither of which the tracker does, are left out and said so.
 """
 
 from __future__ import annotations
@@ -219,6 +219,8 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
         elif table.get("rotation_count", 0) % 4:
             left_out.append(f"{name}: caliscope turns its frames by {90 * table['rotation_count']}°, which the "
                             "tracker does not do")
+        elif table.get("fisheye"):
+            left_out.append(f"{name}: calibrated with caliscope's fisheye model, which the tracker does not model")
         elif table.get("matrix") is None or table.get("distortions") is None:
             left_out.append(f"{name}: no intrinsics in {source.name} (calibrate it first)")
         elif video is None:
@@ -229,8 +231,9 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
             K, dist = np.asarray(table["matrix"], dtype=float), np.asarray(table["distortions"], dtype=float).ravel()
             size = table.get("size")
             if K.shape != (3, 3) or not np.isfinite(K).all() or not np.isfinite(dist).all() or \
-                    not (isinstance(size, list) and len(size) == 2):
-                raise InputError(source, "expected matrix (3 × 3), distortions and size [width, height]", name)
+                    dist.size not in (4, 5, 8, 12, 14) or not (isinstance(size, list) and len(size) == 2):
+                raise InputError(source, "expected matrix (3 × 3), distortions (OpenCV's 4, 5, 8, 12 or 14) and "
+                                         "size [width, height]", name)
             rms = table.get("error")
             cameras.append(SessionCamera(number, K, dist, (int(size[0]), int(size[1])),
                                          float(rms) if isinstance(rms, int | float) else None, video))
