@@ -4,7 +4,8 @@ The command line is the one place that composes everything: the tracker (trackin
 (viewer/) and the simulator (tracking/sim/); nothing imports it (the contracts in pyproject.toml, checked by
 lint-imports). Its commands live by group:
 
-    fieldwork.py   calibrate, detect, markers, check, sync, survey, import-caliscope (and their tables)
+    fieldwork.py   calibrate, detect, markers, check, sync, survey (and their tables)
+    caliscope.py   import-caliscope
     run.py         track, batch, evaluate, demo (track and batch share one run loop)
     archive.py     export, verify
     report.py      report
@@ -23,7 +24,7 @@ from typing import Annotated
 
 import typer
 
-from tracking.cli import archive, fieldwork, live, report, run, sim, view
+from tracking.cli import archive, caliscope, fieldwork, live, report, run, sim, view
 from tracking.cli.common import EXIT_INTERRUPTED, err_console, one_line
 from tracking.errors import EXIT_BAD_INPUT, InputError
 
@@ -66,7 +67,7 @@ def _options(version: Annotated[bool, typer.Option("--version", help="Print the 
 
 for command in (fieldwork.calibrate, fieldwork.detect, fieldwork.markers, run.track, run.batch, archive.export,
                 archive.verify, report.report, view.view, live.live, fieldwork.sync, fieldwork.survey, sim.simulate,
-                run.evaluate, fieldwork.check, fieldwork.import_caliscope, run.demo):
+                run.evaluate, fieldwork.check, caliscope.import_caliscope, run.demo):
     app.command()(command)  # in this order in `topside --help`
 
 
