@@ -146,16 +146,22 @@ def read_board(path: Path, table: dict[str, Any]) -> Board:
 
 def _camera_tables(folder: Path) -> tuple[Path, dict[int, dict[str, Any]]]:
     """The cameras' tables by number, from camera_array.toml or config.toml."""
-    array = folder / "camera_array.toml"
+    array, config = folder / "camera_array.toml", folder / "config.toml"
     if array.is_file():
         cameras = _toml(array).get("cameras", {})
-        return array, {int(t.get("cam_id", k)): t for k, t in cameras.items() if isinstance(t, dict)}
-    config = folder / "config.toml"
-    if config.is_file():
-        data = _toml(config)
-        return config, {int(t.get("port", k.removeprefix("cam_"))): t for k, t in data.items()
-                        if k.startswith("cam_") and isinstance(t, dict)}
-    raise InputError(folder, "no camera_array.toml or config.toml (expected a caliscope session folder)")
+        path, tables = array, [(str(t.get("cam_id", k)), k, t) for k, t in
+                               (cameras.items() if isinstance(cameras, dict) else []) if isinstance(t, dict)]
+    elif config.is_file():
+        path, tables = config, [(str(t.get("port", k.removeprefix("cam_"))), k, t) for k, t in _toml(config).items()
+                                if k.startswith("cam_") and isinstance(t, dict)]
+    else:
+        raise InputError(folder, "no camera_array.toml or config.toml (expected a caliscope session folder)")
+    out = {}
+    for number, key, table in tables:
+        if not number.isdigit():
+            raise InputError(path, f"expected a camera number (cam_id or port), got {number!r}", key)
+        out[int(number)] = table
+    return path, out
 
 
 def _board(folder: Path) -> Board:
@@ -183,8 +189,11 @@ def read_times(videos: Path) -> tuple[Path, dict[int, pd.DataFrame]]:
             raise InputError(path, "missing (expected sync_index, cam_id or port, [frame_index,] frame_time)", column)
     for column in ("sync_index", camera, "frame_time", *(["frame_index"] if "frame_index" in df.columns else [])):
         values = pd.to_numeric(df[column], errors="coerce").to_numpy(dtype=float)
-        if not np.isfinite(values).all():
-            raise InputError(path, f"line {int(np.argmax(~np.isfinite(values))) + 2}: expected a number", column)
+        whole = column != "frame_time"  # numbers of cameras, syncs and frames
+        bad = ~np.isfinite(values) | (whole & (values != np.round(values)))
+        if bad.any():
+            raise InputError(path, f"line {int(np.argmax(bad)) + 2}: expected "
+                                   f"{'a whole number' if whole else 'a number'}", column)
     t0 = float(df["frame_time"].min())
     out = {}
     for number, rows in df.groupby(camera):
@@ -214,9 +223,12 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
     for number, table in sorted(tables.items()):
         name = f"cam_{number}"
         video = _video(videos, number)
+        turns = table.get("rotation_count", 0)
+        if isinstance(turns, bool) or not isinstance(turns, int):
+            raise InputError(source, f"expected quarter turns (an integer), got {turns!r}", f"{name}.rotation_count")
         if table.get("ignore"):
             left_out.append(f"{name}: caliscope marks it ignore")
-        elif table.get("rotation_count", 0) % 4:
+        elif turns % 4:
             left_out.append(f"{name}: caliscope turns its frames by {90 * table['rotation_count']}°, which the "
                             "tracker does not do")
         elif table.get("fisheye"):
@@ -228,14 +240,19 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
         elif number not in times:
             left_out.append(f"{name}: no rows in {times_path.name}")
         else:
-            K, dist = np.asarray(table["matrix"], dtype=float), np.asarray(table["distortions"], dtype=float).ravel()
             size = table.get("size")
+            try:
+                K = np.asarray(table["matrix"], dtype=float)
+                dist = np.asarray(table["distortions"], dtype=float).ravel()
+            except (TypeError, ValueError):
+                K, dist = np.zeros(0), np.zeros(0)
             if K.shape != (3, 3) or not np.isfinite(K).all() or not np.isfinite(dist).all() or \
-                    dist.size not in (4, 5, 8, 12, 14) or not (isinstance(size, list) and len(size) == 2):
-                raise InputError(source, "expected matrix (3 × 3), distortions (OpenCV's 4, 5, 8, 12 or 14) and "
-                                         "size [width, height]", name)
+                    dist.size not in (4, 5, 8, 12, 14) or not (isinstance(size, list) and len(size) == 2) or \
+                    not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size):
+                raise InputError(source, "expected matrix (3 × 3 numbers), distortions (OpenCV's 4, 5, 8, 12 or 14) "
+                                         "and size [width, height] in pixels", name)
             rms = table.get("error")
-            cameras.append(SessionCamera(number, K, dist, (int(size[0]), int(size[1])),
+            cameras.append(SessionCamera(number, K, dist, (size[0], size[1]),
                                          float(rms) if isinstance(rms, int | float) else None, video))
     if not cameras:
         raise InputError(folder, "no camera can be used: " + "; ".join(left_out or ["none listed"]))

@@ -119,3 +119,28 @@ def test_import_caliscope_refuses_a_folder_that_is_no_session_in_one_line(tmp_pa
                           str(tmp_path / "x")], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "no charuco.toml" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize(("edit", "field"), [
+    (lambda t: t.replace("[cameras.0]\ncam_id =0", '[cameras.0]\ncam_id ="front"'), "0"),
+    (lambda t: t.replace("rotation_count = 0", 'rotation_count = "none"', 1), "cam_0.rotation_count"),
+    (lambda t: t.replace("size = [1280, 720]", "size = [1280.5, 720]", 1), "cam_0"),
+    (lambda t: t.replace("matrix = [[", "matrix = [[1.0], [", 1), "cam_0")])
+def test_a_bad_camera_table_is_named_in_one_line(caliscope: Path, tmp_path: Path, edit, field: str) -> None:
+    session = tmp_path / "session"
+    shutil.copytree(caliscope / "post_optimization", session)
+    array = session / "camera_array.toml"
+    array.write_text(edit(array.read_text()))
+    with pytest.raises(InputError) as info:
+        read_session(session)
+    assert f"camera_array.toml: {field}: " in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_times_file_with_a_camera_that_is_no_number_is_named(caliscope: Path, tmp_path: Path) -> None:
+    session = tmp_path / "session"
+    shutil.copytree(caliscope / "post_optimization", session)
+    times = session / "calibration" / "extrinsic" / "timestamps.csv"
+    times.write_text(times.read_text().replace("\n35,2,", "\n35,2.5,", 1))
+    with pytest.raises(InputError) as info:
+        read_session(session)
+    assert "timestamps.csv: cam_id: line 2: expected a whole number" in str(info.value)
