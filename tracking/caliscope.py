@@ -29,16 +29,19 @@ from typing import Any
 import cv2
 import numpy as np
 import pandas as pd
+from pydantic import ValidationError
 
 from tracking.camera import CameraModel, save_camera
 from tracking.errors import InputError
 from tracking.outputs import write_text
-from tracking.rig import CameraEntry, Marker, Mount, Rig, save_rig
+from tracking.rig import CameraEntry, Marker, Mount, Rig, dictionary_size, save_rig
 
 CONE = "A"
 INCHES_PER_CM = 0.393701  # caliscope's own conversion of a board stated in inches
 TIMES_FILES = ("timestamps.csv", "frame_time_history.csv", "frame_timestamps.csv")  # newest name first
 CAMERA_COLUMNS = ("cam_id", "port")
+MAX_SQUARES = 100  # squares a side: a printed board has a few dozen; more is a typo (and OpenCV would allocate it)
+POOLS = (50, 100, 250, 1000)  # the sizes of OpenCV's nested dictionary pools of one family
 VIDEO_NAMES = ("cam_{}.mp4", "port_{}.mp4")
 MOUNT: Mount = "moving"  # the board turns before the cameras: each camera sees its "jacket" turn, as a camera that
 # moves would (a fixed mount's prior would hold the camera still against what its images show)
@@ -119,14 +122,35 @@ def _number(path: Path, table: dict[str, Any], key: str, what: str, positive: bo
     return float(value)
 
 
+def _squares(path: Path, table: dict[str, Any], key: str, what: str) -> int:
+    value = table.get(key)
+    if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= MAX_SQUARES:
+        raise InputError(path, f"expected the number of squares {what}, 2 to {MAX_SQUARES}, got {value!r}", key)
+    return value
+
+
+def _fitting_pool(path: Path, dictionary: str, markers: int) -> str:
+    """The dictionary of the family (DICT_4X4_*) that holds a board's markers: the one named, or the smallest larger
+    one (caliscope grows an undersized pool so: the pools nest, a smaller one's codes are a larger one's first)."""
+    if markers <= dictionary_size(dictionary):
+        return dictionary
+    family = dictionary.rsplit("_", 1)[0]
+    pools = sorted((dictionary_size(f"{family}_{n}"), f"{family}_{n}") for n in POOLS if hasattr(cv2.aruco,
+                                                                                              f"{family}_{n}"))
+    bigger = [name for size, name in pools if size >= markers]
+    if not bigger:
+        raise InputError(path, f"a board of {markers} markers needs more codes than {family} has", "dictionary")
+    return bigger[0]
+
+
 def read_board(path: Path, table: dict[str, Any]) -> Board:
     """The board of a charuco.toml (or config.toml's [charuco]) table read from path."""
-    columns = int(_number(path, table, "columns", "the number of squares across"))
-    rows = int(_number(path, table, "rows", "the number of squares down"))
+    columns, rows = (_squares(path, table, key, what) for key, what in (("columns", "across"), ("rows", "down")))
     dictionary = str(table.get("dictionary", "DICT_4X4_50"))
     if not dictionary.startswith("DICT_") or not hasattr(cv2.aruco, dictionary):
         raise InputError(path, f"expected an OpenCV dictionary name such as DICT_4X4_50, got {dictionary!r}",
                          "dictionary")
+    dictionary = _fitting_pool(path, dictionary, columns * rows // 2)
     override = table.get("square_size_override_cm", table.get("square_size_overide_cm"))
     if override:
         square = _number(path, {"square_size_override_cm": override}, "square_size_override_cm",
@@ -262,20 +286,26 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
 def write_session(session: Session, out: Path, topside_ids: set[int] | None = None,
                   mount: Mount = MOUNT) -> Path:
     """Write out/rig.yaml, out/calibration/cam_N.yaml, out/times/cam_N.csv and out/truth.csv (the offset at cone A,
-    zero at every sync time); the rig's path. Each file is written whole or not at all."""
+    zero at every sync time); the rig's path. The rig is checked before any file is written; each file is written
+    whole or not at all."""
     out = Path(out)
-    entries = []
+    names = {cam.number: f"cam_{cam.number}" for cam in session.cameras}
+    entries = [CameraEntry(name=names[cam.number], calibration=f"calibration/{names[cam.number]}.yaml",
+                           source=os.path.relpath(cam.video.resolve(), out.resolve()),
+                           times=f"times/{names[cam.number]}.csv", mount=mount) for cam in session.cameras]
+    board = session.board
+    try:
+        rig = Rig(name=f"caliscope-{session.source.resolve().name}", dictionary=board.dictionary,
+                  inverted=board.inverted, marker_size=round(board.marker_m, 9), cones={CONE: [0.0, 0.0, 0.0]},
+                  markers=board.markers(topside_ids), cameras=entries)
+    except ValidationError as exc:  # what the board or the cameras give that no rig can hold (sizes beyond limits)
+        error = exc.errors()[0]
+        raise InputError(session.source, f"makes no rig: {error['msg']}",
+                         ".".join(str(p) for p in error["loc"]) or None) from None
     for cam in session.cameras:
-        name = f"cam_{cam.number}"
+        name = names[cam.number]
         save_camera(out / "calibration" / f"{name}.yaml", CameraModel(cam.K, cam.dist, *cam.size, rms=cam.rms))
         write_text(out / "times" / f"{name}.csv", session.times[cam.number].to_csv(index=False))
-        entries.append(CameraEntry(name=name, calibration=f"calibration/{name}.yaml",
-                                   source=os.path.relpath(cam.video.resolve(), out.resolve()),
-                                   times=f"times/{name}.csv", mount=mount))
-    board = session.board
-    rig = Rig(name=f"caliscope-{session.source.resolve().name}", dictionary=board.dictionary,
-              inverted=board.inverted, marker_size=round(board.marker_m, 9), cones={CONE: [0.0, 0.0, 0.0]},
-              markers=board.markers(topside_ids), cameras=entries)
     times = np.unique(np.concatenate([t["time"].to_numpy() for t in session.times.values()]))
     truth = pd.DataFrame({"time": times, "cone": CONE, "dx": 0.0, "dy": 0.0, "dz": 0.0})
     write_text(out / "truth.csv", truth.to_csv(index=False))

@@ -104,7 +104,19 @@ def test_a_board_stated_by_its_size_gets_the_largest_square_that_fits() -> None:
     assert len(markers) == 10 and abs(np.mean([m.center for m in markers], axis=0)).max() < 0.03  # about the centre
 
 
+def test_a_board_with_more_markers_than_its_pool_takes_the_next_pool_of_its_family() -> None:
+    """As caliscope does: DICT_4X4_50 cannot hold a 20 × 20 board's 200 markers, DICT_4X4_250 can."""
+    board = read_board(Path("charuco.toml"), {"columns": 20, "rows": 20, "square_size_override_cm": 2,
+                                              "dictionary": "DICT_4X4_50"})
+    assert board.dictionary == "DICT_4X4_250" and len(board.markers()) == 200
+
+
 @pytest.mark.parametrize(("table", "field"), [({"rows": 5}, "columns"), ({"columns": 4, "rows": 0}, "rows"),
+                                              ({"columns": 4.7, "rows": 5}, "columns"),
+                                              ({"columns": 10**7, "rows": 5}, "columns"),
+                                              ({"columns": 1, "rows": 1}, "columns"),
+                                              ({"columns": 60, "rows": 60, "square_size_override_cm": 1,
+                                                "dictionary": "DICT_4X4_50"}, "dictionary"),
                                               ({"columns": 4, "rows": 5, "dictionary": "DICT_9X9"}, "dictionary"),
                                               ({"columns": 4, "rows": 5, "square_size_override_cm": 5,
                                                 "aruco_scale": 1.5}, "aruco_scale")])
@@ -144,3 +156,14 @@ def test_a_times_file_with_a_camera_that_is_no_number_is_named(caliscope: Path, 
     with pytest.raises(InputError) as info:
         read_session(session)
     assert "timestamps.csv: cam_id: line 2: expected a whole number" in str(info.value)
+
+
+def test_a_board_no_rig_can_hold_writes_nothing(caliscope: Path, tmp_path: Path) -> None:
+    """A square of 200 m (a typo for cm): the rig refuses its markers' size before any file is written."""
+    session = tmp_path / "session"
+    shutil.copytree(caliscope / "post_optimization", session)
+    board = session / "charuco.toml"
+    board.write_text(board.read_text().replace("square_size_override_cm = 5.4", "square_size_override_cm = 20000"))
+    with pytest.raises(InputError) as info:
+        write_session(read_session(session), tmp_path / "out")
+    assert "marker_size" in str(info.value) and not (tmp_path / "out").exists()
