@@ -11,8 +11,9 @@ board does. Board frame (OpenCV's: x right, y down the printed face, z into it) 
 x, z up = -board y, the printed face looks astern (+y). Square and marker sizes follow caliscope: the override in cm
 where given, else the largest square that fits the stated board (inches or cm); markers `aruco_scale` of a square.
 
-Frames: a camera's rows in sync_index order are its video's frames; where frame_index is given it counts from the
-camera's first row (caliscope's test sessions are cut from longer recordings and keep the original numbers).
+Frames: a camera's rows in sync_index (else frame_time) order are its video's frames, one row a frame as caliscope's
+recorder writes them; frame_index is caliscope's own counter (it skips where the synchroniser dropped a frame, and
+its test sessions, cut from longer recordings, keep the original numbers), so it is not read.
 Capture times are seconds after the session's first frame. Cameras caliscope marks `ignore`, whose frames it turns
 (`rotation_count`) or calibrates as fisheye, neither of which the tracker does, are left out and said so.
 """
@@ -38,6 +39,7 @@ from tracking.rig import CameraEntry, Marker, Mount, Rig, dictionary_size, save_
 
 CONE = "A"
 INCHES_PER_CM = 0.393701  # caliscope's own conversion of a board stated in inches
+BOARD_FILES = ("charuco.toml", "calibration/targets/extrinsic_charuco.toml")  # older sessions; caliscope's newer
 TIMES_FILES = ("timestamps.csv", "frame_time_history.csv", "frame_timestamps.csv")  # newest name first
 CAMERA_COLUMNS = ("cam_id", "port")
 MAX_SQUARES = 100  # squares a side: a printed board has a few dozen; more is a typo (and OpenCV would allocate it)
@@ -105,9 +107,18 @@ class Session:
     left_out: list[str] = field(default_factory=list)  # one line per camera left out, and why
 
 
+def _nulls(value: Any) -> Any:
+    """A TOML value with caliscope's "null" strings (rtoml writes a missing value so) as None."""
+    if value == "null":
+        return None
+    if isinstance(value, dict):
+        return {k: _nulls(v) for k, v in value.items()}
+    return [_nulls(v) for v in value] if isinstance(value, list) else value
+
+
 def _toml(path: Path) -> dict[str, Any]:
     try:
-        return tomllib.loads(path.read_text())
+        return _nulls(tomllib.loads(path.read_text()))
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot be read ({exc})") from None
     except tomllib.TOMLDecodeError as exc:
@@ -158,14 +169,24 @@ def read_board(path: Path, table: dict[str, Any]) -> Board:
     else:
         height, width = (_number(path, table, k, f"the board's {k.removeprefix('board_')}")
                          for k in ("board_height", "board_width"))
-        scale = 1 / INCHES_PER_CM if table.get("units", "cm") == "inch" else 1.0
+        units = table.get("units", "inch")  # caliscope's default
+        if units not in ("inch", "cm"):
+            raise InputError(path, f"expected inch or cm, got {units!r}", "units")
+        scale = 1 / INCHES_PER_CM if units == "inch" else 1.0
         square = min(height * scale / 100 / rows, width * scale / 100 / columns)
     aruco_scale = _number(path, {"aruco_scale": table.get("aruco_scale", 0.75)}, "aruco_scale",
                           "the marker's share of a square (0-1)")
     if aruco_scale >= 1:
         raise InputError(path, f"expected the marker's share of a square (0-1), got {aruco_scale}", "aruco_scale")
-    return Board(columns, rows, square, square * aruco_scale, dictionary, bool(table.get("inverted", False)),
-                 bool(table.get("legacy_pattern", False)))
+    return Board(columns, rows, square, square * aruco_scale, dictionary, _flag(path, table, "inverted"),
+                 _flag(path, table, "legacy_pattern"))
+
+
+def _flag(path: Path, table: dict[str, Any], key: str, within: str | None = None) -> bool:
+    value = table.get(key)
+    if value is not None and not isinstance(value, bool):
+        raise InputError(path, f"expected true or false, got {value!r}", f"{within}.{key}" if within else key)
+    return bool(value)
 
 
 def _camera_tables(folder: Path) -> tuple[Path, dict[int, dict[str, Any]]]:
@@ -182,20 +203,23 @@ def _camera_tables(folder: Path) -> tuple[Path, dict[int, dict[str, Any]]]:
         raise InputError(folder, "no camera_array.toml or config.toml (expected a caliscope session folder)")
     out = {}
     for number, key, table in tables:
-        if not number.isdigit():
+        if not (number.isascii() and number.isdecimal()):
             raise InputError(path, f"expected a camera number (cam_id or port), got {number!r}", key)
+        if int(number) in out:
+            raise InputError(path, f"camera {number} is given twice (expected one table a camera)", key)
         out[int(number)] = table
     return path, out
 
 
 def _board(folder: Path) -> Board:
-    charuco = folder / "charuco.toml"
-    if charuco.is_file():
-        return read_board(charuco, _toml(charuco))
+    for charuco in BOARD_FILES:
+        if (folder / charuco).is_file():
+            return read_board(folder / charuco, _toml(folder / charuco))
     config = folder / "config.toml"
     if config.is_file() and isinstance(_toml(config).get("charuco"), dict):
         return read_board(config, _toml(config)["charuco"])
-    raise InputError(folder, "no charuco.toml, nor a [charuco] table in config.toml (expected the session's board)")
+    raise InputError(folder, "no charuco.toml (or calibration/targets/extrinsic_charuco.toml), nor a [charuco] "
+                             "table in config.toml (expected the session's board)")
 
 
 def read_times(videos: Path) -> tuple[Path, dict[int, pd.DataFrame]]:
@@ -208,25 +232,28 @@ def read_times(videos: Path) -> tuple[Path, dict[int, pd.DataFrame]]:
     except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise InputError(path, f"not a CSV file ({' '.join(str(exc).split())})") from None
     camera = next((c for c in CAMERA_COLUMNS if c in df.columns), None)
-    for column in ("sync_index", camera or CAMERA_COLUMNS[0], "frame_time"):
+    for column in (camera or CAMERA_COLUMNS[0], "frame_time"):
         if column not in df.columns:
-            raise InputError(path, "missing (expected sync_index, cam_id or port, [frame_index,] frame_time)", column)
-    for column in ("sync_index", camera, "frame_time", *(["frame_index"] if "frame_index" in df.columns else [])):
+            raise InputError(path, "missing (expected cam_id or port, frame_time, and optionally sync_index)", column)
+    for column in (camera, "frame_time", *(["sync_index"] if "sync_index" in df.columns else [])):
         values = pd.to_numeric(df[column], errors="coerce").to_numpy(dtype=float)
-        whole = column != "frame_time"  # numbers of cameras, syncs and frames
+        whole = column != "frame_time"  # numbers of cameras and syncs
         bad = ~np.isfinite(values) | (whole & (values != np.round(values)))
         if bad.any():
             raise InputError(path, f"line {int(np.argmax(bad)) + 2}: expected "
                                    f"{'a whole number' if whole else 'a number'}", column)
+        df[column] = values
     t0 = float(df["frame_time"].min())
     out = {}
     for number, rows in df.groupby(camera):
-        rows = rows.sort_values("sync_index", kind="stable")
-        if "frame_index" in rows:
-            frame = (rows["frame_index"] - rows["frame_index"].min()).to_numpy(dtype=int)
-        else:
-            frame = np.arange(len(rows))
-        out[int(number)] = pd.DataFrame({"frame": frame, "time": (rows["frame_time"] - t0).round(6).to_numpy()})
+        rows = rows.sort_values(["sync_index", "frame_time"] if "sync_index" in rows else "frame_time",
+                                kind="stable")  # a row per video frame, as caliscope's recorder writes them
+        times = rows["frame_time"].to_numpy()
+        if np.any(np.diff(times) <= 0):
+            k = int(np.argmax(np.diff(times) <= 0)) + 1
+            raise InputError(path, f"line {int(rows.index[k]) + 2}: cam {int(number)}'s frame at {times[k]} s is not "
+                                   "after the one before it (expected one row per frame, in time order)", "frame_time")
+        out[int(number)] = pd.DataFrame({"frame": np.arange(len(rows)), "time": (times - t0).round(6)})
     return path, out
 
 
@@ -250,12 +277,12 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
         turns = table.get("rotation_count", 0)
         if isinstance(turns, bool) or not isinstance(turns, int):
             raise InputError(source, f"expected quarter turns (an integer), got {turns!r}", f"{name}.rotation_count")
-        if table.get("ignore"):
+        if _flag(source, table, "ignore", name):
             left_out.append(f"{name}: caliscope marks it ignore")
         elif turns % 4:
             left_out.append(f"{name}: caliscope turns its frames by {90 * table['rotation_count']}°, which the "
                             "tracker does not do")
-        elif table.get("fisheye"):
+        elif _flag(source, table, "fisheye", name):
             left_out.append(f"{name}: calibrated with caliscope's fisheye model, which the tracker does not model")
         elif table.get("matrix") is None or table.get("distortions") is None:
             left_out.append(f"{name}: no intrinsics in {source.name} (calibrate it first)")

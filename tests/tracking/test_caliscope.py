@@ -167,3 +167,67 @@ def test_a_board_no_rig_can_hold_writes_nothing(caliscope: Path, tmp_path: Path)
     with pytest.raises(InputError) as info:
         write_session(read_session(session), tmp_path / "out")
     assert "marker_size" in str(info.value) and not (tmp_path / "out").exists()
+
+
+def session_copy(caliscope: Path, tmp_path: Path) -> Path:
+    session = tmp_path / "session"
+    shutil.copytree(caliscope / "post_optimization", session)
+    return session
+
+
+def test_a_dropped_frames_row_shifts_only_the_frames_after_it(caliscope: Path, tmp_path: Path) -> None:
+    """One row a video frame: a camera whose sync 40 has no row (the synchroniser dropped it) numbers its frames by
+    their order, whatever caliscope's own frame counter says."""
+    session = session_copy(caliscope, tmp_path)
+    path = session / "calibration" / "extrinsic" / "timestamps.csv"
+    df = pd.read_csv(path)
+    df = df[~((df["cam_id"] == 0) & (df["sync_index"] == 40))].assign(frame_index=lambda d: d["sync_index"])
+    df.to_csv(path, index=False)
+    times = read_session(session).times[0]
+    assert list(times["frame"]) == list(range(56))
+    rows = df[df["cam_id"] == 0].sort_values("sync_index")
+    assert np.allclose(times["time"], rows["frame_time"] - df["frame_time"].min(), atol=1e-6)
+
+
+def test_the_newest_caliscope_layout_is_read(caliscope: Path, tmp_path: Path) -> None:
+    """caliscope's newest files: timestamps.csv of cam_id and frame_time alone, the board in
+    calibration/targets/extrinsic_charuco.toml without units (inches, its default), an uncalibrated camera's
+    matrix written as the string "null" (left out, and said so)."""
+    session = session_copy(caliscope, tmp_path)
+    path = session / "calibration" / "extrinsic" / "timestamps.csv"
+    pd.read_csv(path)[["cam_id", "frame_time"]].to_csv(path, index=False)
+    board = (session / "charuco.toml").read_text().replace('units = "inch"\n', "")
+    (session / "charuco.toml").unlink()
+    (session / "calibration" / "targets").mkdir()
+    (session / "calibration" / "targets" / "extrinsic_charuco.toml").write_text(board)
+    array = session / "camera_array.toml"
+    text = array.read_text()
+    start = text.index("[cameras.3]")
+    array.write_text(text[:start] + text[start:].replace("matrix = [[", 'matrix = "null"\nold = [[', 1))
+    loaded = read_session(session)
+    assert [c.number for c in loaded.cameras] == [0, 1, 2] and any("cam_3: no intrinsics" in x for x in loaded.left_out)
+    assert loaded.board.marker_m == pytest.approx(0.0405)
+    reference = read_session(caliscope / "post_optimization")
+    assert all(np.array_equal(loaded.times[k], reference.times[k]) for k in (0, 1, 2))
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda t: t.replace("[cameras.1]\ncam_id =1", "[cameras.1]\ncam_id =0"), "camera 0 is given twice"),
+    (lambda t: t.replace("ignore = false", 'ignore = "no"', 1), "cam_0.ignore: expected true or false")])
+def test_camera_tables_that_contradict_themselves_are_named(caliscope: Path, tmp_path: Path, edit, message: str
+                                                            ) -> None:
+    session = session_copy(caliscope, tmp_path)
+    array = session / "camera_array.toml"
+    array.write_text(edit(array.read_text()))
+    with pytest.raises(InputError, match=message):
+        read_session(session)
+
+
+def test_a_frame_listed_twice_is_named_in_the_sessions_file(caliscope: Path, tmp_path: Path) -> None:
+    session = session_copy(caliscope, tmp_path)
+    path = session / "calibration" / "extrinsic" / "timestamps.csv"
+    df = pd.read_csv(path)
+    pd.concat([df, df.iloc[[0]]]).to_csv(path, index=False)
+    with pytest.raises(InputError) as info:
+        read_session(session)
+    assert "timestamps.csv: frame_time: line" in str(info.value) and "is not after the one before it" in str(info.value)

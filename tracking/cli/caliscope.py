@@ -12,6 +12,8 @@ from tracking.cli.common import console, warn_lines
 from tracking.errors import InputError
 from tracking.outputs import check_outputs
 
+MAX_IDS = 100_000  # ids in one range of --topside: more than any dictionary holds
+
 
 def import_caliscope(
     session: Annotated[Path, typer.Argument(help="caliscope session folder (charuco.toml, camera_array.toml).")],
@@ -52,7 +54,10 @@ def _id_set(text: str, option: str) -> set[int]:
     try:
         for part in text.split(","):
             first, _, last = part.strip().partition("-")
-            ids.update(range(int(first), int(last or first) + 1))
+            low, high = int(first), int(last or first)
+            if high - low > MAX_IDS:
+                raise ValueError
+            ids.update(range(low, high + 1))
     except ValueError:
         raise InputError(option, f"expected ids such as 0-4,7, got {text!r}") from None
     return ids

@@ -209,7 +209,8 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
     rows: list[_Rows] = []
     for marker, z in sorted(corners.items()):
         r = _rows(s, cam, marker, z, K, columns, views[marker], x0, x0, P0, topside)
-        if float(r.y @ dgesv(r.HPH + r.R, r.y)[2]) > CORNER_GATE_CHI2:  # LAPACK's solve, without numpy's checks
+        _, _, solved, info = dgesv(r.HPH + r.R, r.y)  # LAPACK's solve, without numpy's checks
+        if info != 0 or float(r.y @ solved) > CORNER_GATE_CHI2:  # (singular: refused, as numpy's error would)
             s.rejected += 1
             continue
         rows.append(r)
