@@ -14,8 +14,9 @@ where given, else the largest square that fits the stated board (inches or cm); 
 Frames: a camera's rows in sync_index (else frame_time) order are its video's frames, one row a frame as caliscope's
 recorder writes them; frame_index is caliscope's own counter (it skips where the synchroniser dropped a frame, and
 its test sessions, cut from longer recordings, keep the original numbers), so it is not read.
-Capture times are seconds after the session's first frame. Cameras caliscope marks `ignore`, whose frames it turns
-(`rotation_count`) or calibrates as fisheye, neither of which the tracker does, are left out and said so.
+Capture times are seconds after the session's first frame. Cameras caliscope marks `ignore` or calibrates as fisheye
+(which the tracker does not model) are left out and said so. A camera's `rotation_count` is how caliscope shows its
+frames: its trackers turn a frame, detect, and turn the points back, so its intrinsics are the video's as recorded.
 """
 
 from __future__ import annotations
@@ -274,14 +275,12 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
     for number, table in sorted(tables.items()):
         name = f"cam_{number}"
         video = _video(videos, number)
-        turns = table.get("rotation_count", 0)
+        turns = table.get("rotation_count", 0)  # how caliscope shows the frames (and turns them for its detectors):
+        # its points and intrinsics are in the video's own pixels, so nothing here depends on it
         if isinstance(turns, bool) or not isinstance(turns, int):
             raise InputError(source, f"expected quarter turns (an integer), got {turns!r}", f"{name}.rotation_count")
         if _flag(source, table, "ignore", name):
             left_out.append(f"{name}: caliscope marks it ignore")
-        elif turns % 4:
-            left_out.append(f"{name}: caliscope turns its frames by {90 * table['rotation_count']}°, which the "
-                            "tracker does not do")
         elif _flag(source, table, "fisheye", name):
             left_out.append(f"{name}: calibrated with caliscope's fisheye model, which the tracker does not model")
         elif table.get("matrix") is None or table.get("distortions") is None:
