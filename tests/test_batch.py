@@ -35,7 +35,7 @@ def test_batch_goes_on_past_a_broken_installation(clip: Path, installation: Path
     manifest = tmp_path / "manifest.yaml"
     manifest.write_text(
         "installations:\n"
-        f"  - {{rig: {clip / 'rig.yaml'}, out: results/weather, truth: {clip / 'truth.csv'}, rrd: true, "
+        f"  - {{rig: {clip / 'rig.yaml'}, out: results/weather, truth: {clip / 'truth.csv'}, report: true, "
         "name: weather}\n"
         f"  - {{rig: {broken}, out: results/broken, name: broken-on-purpose}}\n"
         f"  - {{rig: {installation / 'rig.yaml'}, out: results/cone-a, truth: {installation / 'truth.csv'}, "
@@ -55,7 +55,11 @@ def test_batch_goes_on_past_a_broken_installation(clip: Path, installation: Path
     for name in ("weather", "cone-a"):
         assert (tmp_path / "results" / name / "offsets.csv").read_text().count("\n") > 10
         assert "e_MAE" in (tmp_path / "results" / name / "accuracy.md").read_text()
-    assert (tmp_path / "results" / "weather" / "run.rrd").stat().st_size > 10_000
+    assert (tmp_path / "results" / "weather" / "run.rrd").stat().st_size > 10_000  # report: true records the run
+    page = (tmp_path / "results" / "weather" / "report.html").read_text()
+    (verdict,) = [line for line in proc.stdout.splitlines() if line.startswith("weather: ")]
+    assert verdict.removeprefix("weather: ") in page  # the lift's verdict, printed and on its page
+    assert not (tmp_path / "results" / "cone-a" / "report.html").exists()
     assert not (tmp_path / "results" / "broken").exists()
 
 

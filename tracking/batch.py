@@ -5,11 +5,11 @@ line in flow style::
 
     installations:
       - {rig: site-a/rig.yaml, out: results/site-a, truth: site-a/truth.csv}
-      - {rig: site-b/rig.yaml, out: results/site-b, mode: smoothed, rrd: true}
+      - {rig: site-b/rig.yaml, out: results/site-b, mode: smoothed, report: true}
 
 Paths are relative to the manifest's folder. Each installation writes `offsets.csv` into its `out` folder (and
-`run.rrd` with `rrd: true`, `accuracy.md` when a truth is given). One that fails is reported with its one-line reason
-and the others go on.
+`run.rrd` with `rrd: true`, `run.rrd` and its `report.html` with `report: true`, `accuracy.md` when a truth is
+given). One that fails is reported with its one-line reason and the others go on.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ MODES = ("fused", "smoothed", "paper", "raw")  # tracking.estimator.ESTIMATORS' 
 OFFSETS_NAME = "offsets.csv"
 RRD_NAME = "run.rrd"
 ACCURACY_NAME = "accuracy.md"
+REPORT_NAME = "report.html"
+FIELDS = "rig, out, and optionally truth, name, mode, rrd, report"
 
 
 class Installation(BaseModel):
@@ -36,11 +38,12 @@ class Installation(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     rig: Path
-    out: Path  # a folder: offsets.csv, run.rrd, accuracy.md
+    out: Path  # a folder: offsets.csv, run.rrd, report.html, accuracy.md
     truth: Path | None = None  # a truth log (the simulator's truth.csv, or time, cone, dx, dy, dz) to score against
     name: str = ""  # for the summary (default: the rig file's folder)
     mode: str = "fused"
     rrd: bool = False  # also write run.rrd
+    report: bool = False  # also write run.rrd and the lift's report.html from it (`topside report`'s page)
 
     @field_validator("mode")
     @classmethod
@@ -70,7 +73,7 @@ def load_manifest(path: str | Path) -> list[Installation]:
     if isinstance(data, list):
         data = {"installations": data}
     if not isinstance(data, dict):
-        raise InputError(path, "expected a list of installations (rig, out, and optionally truth, name, mode, rrd)")
+        raise InputError(path, f"expected a list of installations ({FIELDS})")
     try:
         manifest = Manifest.model_validate(data)
     except ValidationError as exc:
@@ -79,7 +82,7 @@ def load_manifest(path: str | Path) -> list[Installation]:
         if err["type"] == "missing":
             msg = "missing (expected rig and out for every installation)"
         elif err["type"] == "extra_forbidden":
-            msg = "not a field (expected rig, out, truth, name, mode, rrd)"
+            msg = f"not a field (expected {FIELDS})"
         raise InputError(path, msg, _format_location(err["loc"]) or None) from None
     base = path.parent
     out = [i.model_copy(update={"rig": base / i.rig, "out": base / i.out,
@@ -126,6 +129,7 @@ class Outcome:
     mae_mm: tuple[float, float, float] | None = None  # e_MAE x, y, z against the truth, mm
     max_mm: float | None = None  # the largest |error| of any axis, mm
     error: str = ""  # one line: why it failed ('' when it did not)
+    verdict: str = ""  # the report's verdict, with report: true
 
     @property
     def ok(self) -> bool:

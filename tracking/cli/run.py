@@ -333,7 +333,8 @@ def batch(
     one_pass_fusion: OnePassOption = False,
     fusion_segment: FusionSegmentOption = FUSION_SEGMENT_DEFAULT,
 ) -> None:
-    """Re-analyse many installations: each one's offsets.csv (run.rrd with rrd: true, accuracy.md with a truth) in
+    """Re-analyse many installations: each one's offsets.csv (run.rrd with rrd: true, run.rrd and the lift's
+    report.html with report: true, accuracy.md with a truth) in
     its out folder, one progress bar over all, then a table: frames, video and wall time, accuracy, failures.
 
     With at least as many installations as workers, each is tracked and fused whole by one worker, as many at once as
@@ -457,14 +458,17 @@ def _batch_one(one: Prepared, run: Runner, refine: Refinement, fusion: Fusion, a
 
 
 def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome, fusion: Fusion) -> None:
-    """One installation's offsets.csv (and run.rrd), then, with a truth, its accuracy.md and errors in outcome."""
-    from tracking.batch import ACCURACY_NAME, OFFSETS_NAME, RRD_NAME
+    """One installation's offsets.csv (and run.rrd), its report.html and verdict with report: true, then, with a truth,
+    its accuracy.md and errors in outcome."""
+    from tracking.batch import ACCURACY_NAME, OFFSETS_NAME, REPORT_NAME, RRD_NAME
     from tracking.evaluate import evaluate_runs, evaluation_markdown, read_offsets, read_truth
-    from tracking.outputs import write_text
+    from tracking.outputs import write_bytes, write_text
 
-    csv, rrd = inst.out / OFFSETS_NAME, (inst.out / RRD_NAME) if inst.rrd else None
+    csv, rrd = inst.out / OFFSETS_NAME, (inst.out / RRD_NAME) if inst.rrd or inst.report else None
     accuracy = inst.out / ACCURACY_NAME if inst.truth is not None else None
-    check_outputs({"out": csv, "rrd": rrd, "accuracy": accuracy}, [*rig_inputs(loop.rig), inst.truth])
+    report = inst.out / REPORT_NAME if inst.report else None
+    check_outputs({"out": csv, "rrd": rrd, "accuracy": accuracy, "report": report},
+                  [*rig_inputs(loop.rig), inst.truth])
     truth_df = read_truth(inst.truth) if inst.truth is not None else None
     with Outputs() as outputs:
         if rrd is not None:
@@ -472,6 +476,11 @@ def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome, fus
                                        {"mode": inst.mode, "refine": loop.refine.value}))
         loop.write(outputs.claim(csv), fusion.estimator(inst.mode, loop.run, poses=bool(loop.sinks)))
     outcome.rows = loop.rows
+    if report is not None and rrd is not None:  # the lift's page, from its recording as `topside report` reads it
+        from viewer.installation_record import read_record
+        from viewer.report import write_report
+
+        outcome.verdict = write_report(read_record(rrd), report, write_text, None, write_bytes).verdict
     if truth_df is not None and accuracy is not None:
         ev = evaluate_runs(inst.label, [(read_offsets(csv), truth_df)])
         axes = list(ev.axes.values())
@@ -497,6 +506,9 @@ def _print_batch(manifest: Path, outcomes: list[Outcome], seconds: float, how: s
                       f"{o.max_mm:.0f}" if o.max_mm is not None else "—", "ok" if o.ok else "FAILED")
     console.print(table)
     console.print(f"installations tracked {how}")
+    for o in outcomes:
+        if o.verdict:
+            console.print(f"{o.name}: {o.verdict}", markup=False, soft_wrap=True)
     for o in outcomes:
         if not o.ok:
             err_console.print(f"topside: {o.name} failed: {o.error}", markup=False)
