@@ -33,10 +33,11 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
+from tracking.calibration import BoardSpec
 from tracking.camera import CameraModel, save_camera
 from tracking.errors import InputError
 from tracking.outputs import write_text
-from tracking.rig import CameraEntry, Marker, Mount, Rig, dictionary_size, save_rig
+from tracking.rig import CameraEntry, Marker, Mount, Rig, dictionary_size, rig_error, save_rig
 
 CONE = "A"
 INCHES_PER_CM = 0.393701  # caliscope's own conversion of a board stated in inches
@@ -63,8 +64,8 @@ class Board:
     legacy: bool = False  # OpenCV's pattern before 4.6 (differs on boards with an even number of rows)
 
     def opencv(self) -> cv2.aruco.CharucoBoard:
-        board = cv2.aruco.CharucoBoard((self.columns, self.rows), self.square_m, self.marker_m,
-                                       cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary)))
+        board = BoardSpec("charuco", self.columns, self.rows, self.square_m, self.marker_m,
+                          self.dictionary).charuco_board()
         board.setLegacyPattern(self.legacy)
         return board
 
@@ -217,8 +218,9 @@ def _board(folder: Path) -> Board:
         if (folder / charuco).is_file():
             return read_board(folder / charuco, _toml(folder / charuco))
     config = folder / "config.toml"
-    if config.is_file() and isinstance(_toml(config).get("charuco"), dict):
-        return read_board(config, _toml(config)["charuco"])
+    table = _toml(config).get("charuco") if config.is_file() else None
+    if isinstance(table, dict):
+        return read_board(config, table)
     raise InputError(folder, "no charuco.toml (or calibration/targets/extrinsic_charuco.toml), nor a [charuco] "
                              "table in config.toml (expected the session's board)")
 
@@ -312,8 +314,8 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
 def write_session(session: Session, out: Path, topside_ids: set[int] | None = None,
                   mount: Mount = MOUNT) -> Path:
     """Write out/rig.yaml, out/calibration/cam_N.yaml, out/times/cam_N.csv and out/truth.csv (the offset at cone A,
-    zero at every sync time); the rig's path. The rig is checked before any file is written; each file is written
-    whole or not at all."""
+    zero at every frame time of the cameras kept); the rig's path. The rig is checked before any file is written;
+    each file is written whole or not at all."""
     out = Path(out)
     names = {cam.number: f"cam_{cam.number}" for cam in session.cameras}
     entries = [CameraEntry(name=names[cam.number], calibration=f"calibration/{names[cam.number]}.yaml",
@@ -325,14 +327,12 @@ def write_session(session: Session, out: Path, topside_ids: set[int] | None = No
                   inverted=board.inverted, marker_size=round(board.marker_m, 9), cones={CONE: [0.0, 0.0, 0.0]},
                   markers=board.markers(topside_ids), cameras=entries)
     except ValidationError as exc:  # what the board or the cameras give that no rig can hold (sizes beyond limits)
-        error = exc.errors()[0]
-        raise InputError(session.source, f"makes no rig: {error['msg']}",
-                         ".".join(str(p) for p in error["loc"]) or None) from None
+        raise rig_error(session.source, exc) from None
     for cam in session.cameras:
         name = names[cam.number]
         save_camera(out / "calibration" / f"{name}.yaml", CameraModel(cam.K, cam.dist, *cam.size, rms=cam.rms))
         write_text(out / "times" / f"{name}.csv", session.times[cam.number].to_csv(index=False))
-    times = np.unique(np.concatenate([t["time"].to_numpy() for t in session.times.values()]))
+    times = np.unique(np.concatenate([session.times[cam.number]["time"].to_numpy() for cam in session.cameras]))
     truth = pd.DataFrame({"time": times, "cone": CONE, "dx": 0.0, "dy": 0.0, "dz": 0.0})
     write_text(out / "truth.csv", truth.to_csv(index=False))
     save_rig(out / "rig.yaml", rig)

@@ -514,19 +514,24 @@ def load_rig(path: str | Path) -> Rig:
     try:
         rig = Rig.model_validate(data)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        msg = err["msg"].removeprefix("Value error, ")
-        loc = _format_location(err["loc"])
-        head, sep, rest = msg.partition(": ")
-        if sep and " " not in head:  # a cross-field check names its own field: "pairs[0].topside: ..."
-            loc, msg = ".".join(p for p in (loc, head) if p), rest
-        if err["type"] == "literal_error":
-            msg = f"got {err['input']!r}; {msg[0].lower()}{msg[1:]}"
-        raise InputError(path, msg, loc or None) from None
+        raise rig_error(path, exc) from None
     rig = rig.model_copy(update={"path": path, "warnings": rig_warnings(path, rig)})
     for entry in rig.cameras:  # a times file that cannot be read is named now, before any work
         rig.clock(entry)
     return rig
+
+
+def rig_error(source: str | Path, exc: ValidationError) -> InputError:
+    """A rig's first validation error as one line naming its field (markers[2].center[1])."""
+    err = exc.errors()[0]
+    msg = err["msg"].removeprefix("Value error, ")
+    loc = _format_location(err["loc"])
+    head, sep, rest = msg.partition(": ")
+    if sep and " " not in head:  # a cross-field check names its own field: "pairs[0].topside: ..."
+        loc, msg = ".".join(p for p in (loc, head) if p), rest
+    if err["type"] == "literal_error":
+        msg = f"got {err['input']!r}; {msg[0].lower()}{msg[1:]}"
+    return InputError(source, msg, loc or None)
 
 
 @lru_cache(maxsize=32)
