@@ -14,9 +14,12 @@ where given, else the largest square that fits the stated board (inches or cm); 
 Frames: a camera's rows in sync_index (else frame_time) order are its video's frames, one row a frame as caliscope's
 recorder writes them; frame_index is caliscope's own counter (it skips where the synchroniser dropped a frame, and
 its test sessions, cut from longer recordings, keep the original numbers), so it is not read.
-Capture times are seconds after the session's first frame. Cameras caliscope marks `ignore` or calibrates as fisheye
-(which the tracker does not model) are left out and said so. A camera's `rotation_count` is how caliscope shows its
-frames: its trackers turn a frame, detect, and turn the points back, so its intrinsics are the video's as recorded.
+Capture times are seconds after the session's first frame. A session without a times file (caliscope's
+post_monocal layout) takes its videos' own presentation times, said so: caliscope records them nominal (k / fps), so
+its cameras' frames are then taken as simultaneous where they were only near it. Cameras caliscope marks `ignore` or
+calibrates as fisheye (which the tracker does not model) are left out and said so. A camera's `rotation_count` is
+how caliscope shows its frames: its trackers turn a frame, detect, and turn the points back, so its intrinsics are the
+video's as recorded.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import av
 import cv2
 import numpy as np
 import pandas as pd
@@ -36,6 +40,7 @@ from pydantic import ValidationError
 from tracking.calibration import BoardSpec
 from tracking.camera import CameraModel, save_camera
 from tracking.errors import InputError
+from tracking.images import open_video
 from tracking.outputs import write_text
 from tracking.rig import CameraEntry, Marker, Mount, Rig, dictionary_size, rig_error, save_rig
 
@@ -107,6 +112,7 @@ class Session:
     cameras: list[SessionCamera]
     times: dict[int, pd.DataFrame]  # camera number -> frame, time (s after the session's first frame)
     left_out: list[str] = field(default_factory=list)  # one line per camera left out, and why
+    notes: list[str] = field(default_factory=list)  # what a user should know of the import (one line each)
 
 
 def _nulls(value: Any) -> Any:
@@ -225,9 +231,30 @@ def _board(folder: Path) -> Board:
                              "table in config.toml (expected the session's board)")
 
 
+def times_file(videos: Path) -> Path | None:
+    """The session's times file in the videos' folder, if it has one."""
+    return next((videos / name for name in TIMES_FILES if (videos / name).is_file()), None)
+
+
+def video_times(videos: dict[int, Path]) -> dict[int, pd.DataFrame]:
+    """Each camera's frame, time table from its video's own presentation times (seconds after the first frame of
+    any of them), for a session without a times file."""
+    own = {}
+    for number, video in videos.items():
+        try:
+            with open_video(video) as container:
+                stream = container.streams.video[0]
+                pts = sorted(p.pts for p in container.demux(stream) if p.size and p.pts is not None)
+        except av.error.FFmpegError as exc:
+            raise InputError(video, f"video is damaged ({exc.strerror or exc})") from None
+        own[number] = np.asarray(pts, dtype=float) * float(stream.time_base)
+    t0 = min((t[0] for t in own.values() if t.size), default=0.0)
+    return {n: pd.DataFrame({"frame": np.arange(t.size), "time": (t - t0).round(6)}) for n, t in own.items()}
+
+
 def read_times(videos: Path) -> tuple[Path, dict[int, pd.DataFrame]]:
     """Each camera's frame, time table from the session's times file in the videos' folder."""
-    path = next((videos / name for name in TIMES_FILES if (videos / name).is_file()), None)
+    path = times_file(videos)
     if path is None:
         raise InputError(videos, f"no {' or '.join(TIMES_FILES)} (expected each frame's capture time)")
     try:
@@ -272,7 +299,9 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
     videos = folder / "calibration" / "extrinsic" if videos is None else Path(videos)
     board = _board(folder)
     source, tables = _camera_tables(folder)
-    times_path, times = read_times(videos)
+    times_path = times_file(videos)
+    times = read_times(videos)[1] if times_path is not None else \
+        video_times({n: v for n in tables if (v := _video(videos, n)) is not None})
     cameras, left_out = [], []
     for number, table in sorted(tables.items()):
         name = f"cam_{number}"
@@ -290,7 +319,7 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
         elif video is None:
             left_out.append(f"{name}: no {' or '.join(n.format(number) for n in VIDEO_NAMES)} in {videos}")
         elif number not in times:
-            left_out.append(f"{name}: no rows in {times_path.name}")
+            left_out.append(f"{name}: no rows in {times_path.name if times_path else 'its video'}")
         else:
             size = table.get("size")
             try:
@@ -308,7 +337,10 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
                                          float(rms) if isinstance(rms, int | float) else None, video))
     if not cameras:
         raise InputError(folder, "no camera can be used: " + "; ".join(left_out or ["none listed"]))
-    return Session(folder, board, cameras, times, left_out)
+    notes = [] if times_path is not None else [
+        f"{videos}: no {' or '.join(TIMES_FILES)}: each frame's time is its video's own (caliscope writes them "
+        "nominal, k / fps), so the cameras are taken as synchronised frame by frame"]
+    return Session(folder, board, cameras, times, left_out, notes)
 
 
 def write_session(session: Session, out: Path, topside_ids: set[int] | None = None,

@@ -230,3 +230,24 @@ def test_a_frame_listed_twice_is_named_in_the_sessions_file(caliscope: Path, tmp
     with pytest.raises(InputError) as info:
         read_session(session)
     assert "timestamps.csv: frame_time: line" in str(info.value) and "is not after the one before it" in str(info.value)
+
+
+def test_a_session_without_a_times_file_takes_its_videos_own_times_and_says_so(caliscope: Path,
+                                                                               tmp_path: Path) -> None:
+    """caliscope's post_monocal layout has no timestamps.csv: each frame's time is its video's presentation time
+    (nominal k / 6 s here), a line says so, and the truth covers those times."""
+    src = caliscope / "post_optimization"
+    session_dir = tmp_path / "post_monocal"
+    shutil.copytree(src, session_dir, ignore=shutil.ignore_patterns("timestamps.csv"))
+    out = tmp_path / "out"
+    result = subprocess.run([sys.executable, "-m", "tracking.cli", "import-caliscope", str(session_dir), "-o",
+                             str(out)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "no timestamps.csv" in result.stderr and "video's own" in result.stderr
+    rig = load_rig(out / "rig.yaml")
+    for cam in rig.cameras:
+        times = read_frame_times(rig.resolve(cam.times))
+        assert len(times) == video_frames(rig.resolve(cam.source)) == 57
+        assert np.allclose(times, np.arange(57) / 6.0, atol=1e-5)
+    truth = pd.read_csv(out / "truth.csv")
+    assert np.allclose(truth["time"], np.arange(57) / 6.0, atol=1e-5)

@@ -41,6 +41,7 @@ def import_caliscope(
                    **{f"--out ({n}.yaml)": out / "calibration" / f"{n}.yaml" for n in names},
                    **{f"--out ({n}.csv)": out / "times" / f"{n}.csv" for n in names}}, inputs)
     warn_lines(f"{line}: left out" for line in the_session.left_out)
+    warn_lines(the_session.notes)
     rig_path = write_session(the_session, out, ids)
     board = the_session.board
     console.print(f"wrote {rig_path}: {board.columns} × {board.rows} board of {board.dictionary}, markers "

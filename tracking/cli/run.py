@@ -242,7 +242,7 @@ def track(
     _print_track_summary(the_rig, rig, mode, loop.stats, fusion)
     _print_track_outputs(loop.rows, out, rrd, mcap)
     if mode in (Mode.FUSED, Mode.SMOOTHED):
-        _rig_findings(rig, report)
+        _rig_findings(rig, report, loop.stats)
 
 
 def _plan(loop: RunLoop, progress: Reporter, chunk_frames: int) -> None:
@@ -296,10 +296,12 @@ def _print_track_outputs(rows: int, out: Path, rrd: Path | None, mcap: Path | No
         console.print(f"wrote {mcap} (check it with: topside verify {mcap})")
 
 
-def _rig_findings(rig_path: Path, report: FilterReport) -> None:
+def _rig_findings(rig_path: Path, report: FilterReport, stats: TrackStats | None = None) -> None:
     """After a fused run: a rig error it found (the markers' size, the topside through its cones), which withheld the
-    offsets, is one error line and exit status 2; else a warning each for the cameras never placed (with why) and a
-    scale nothing fixed."""
+    offsets, is one error line and exit status 2; else a warning each for the cameras never placed (with why: where
+    the filter had none of its frames, the markers it dropped as seen mirrored) and a scale nothing fixed."""
+    from tracking.estimator.state import NOT_SEEN
+
     if report.scale.mismatch:
         raise InputError(rig_path, report.scale.message() + "; the offsets were withheld", "marker_size")
     if report.below[0]:
@@ -307,6 +309,10 @@ def _rig_findings(rig_path: Path, report: FilterReport) -> None:
                                    "its cone tips, where no set-down can be (withheld): marker_size, a marker's centre "
                                    "or a pair's mated offset is wrong", "marker_size")
     for name, why in report.unplaced.items():
+        mirrored = sorted(i for (cam, i) in (stats.mirrored if stats is not None else {}) if cam == name)
+        if mirrored and why == NOT_SEEN:
+            why = (f"its rig markers ({', '.join(map(str, mirrored))}) were seen only mirrored (the board's back, or a "
+                   "reflection) and nothing confirmed them")
         err_console.print(f"topside: warning: {name}: never placed, so none of its frames was used: {why}",
                           markup=False)
     if not report.scale.fixed:

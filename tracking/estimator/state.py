@@ -59,6 +59,10 @@ class ViewBias:
     time: float
 
 
+NOT_SEEN = "no rig marker in any of its frames"  # why a camera is not placed that the filter never had a frame of (it
+# gets a camera's frames only where they show rig markers)
+
+
 @dataclass
 class CameraState:
     """The nominal pose of one camera in the jacket frame, about which the filter holds its error."""
@@ -74,7 +78,7 @@ class CameraState:
     model_px: float = 0.0  # its calibration's RMS reprojection error, px (BodyObservation.model_px)
     motion_scale: float = 1.0  # share of its mount's process noise the camera gets (1 until its level is known)
     hypotheses: Hypotheses | None = None  # while an ambiguous jacket view waits: its options and their evidence
-    waiting: str = "no frame of it yet"  # why it is not placed (empty once placed)
+    waiting: str = NOT_SEEN  # why it is not placed (empty once placed)
     placed_at: float | None = None  # capture time of its (last) placement, s
 
     @property
