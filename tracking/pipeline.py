@@ -106,6 +106,17 @@ class TrackStats:
         if r.frame.video is not None:
             self.videos[r.camera] = r.frame.video
 
+    def never_placed(self, camera: str, why: str) -> str:
+        """Why the filter never placed a camera (its CameraState.waiting), said better where it had none of its frames
+        because every rig marker it showed was dropped as seen mirrored."""
+        from tracking.estimator.state import NOT_SEEN
+
+        mirrored = sorted(i for (cam, i) in self.mirrored if cam == camera)
+        if not mirrored or why != NOT_SEEN:
+            return why
+        return (f"its rig markers ({', '.join(map(str, mirrored))}) were seen only mirrored (the board's back, or a "
+                "reflection) and nothing confirmed them")
+
     def warnings(self, cameras: Iterable[str] = ()) -> list[str]:
         """One line per camera whose video ended early, or whose timestamps went backwards, repeated, jumped or were
         missing, or that gave no frame at all; cameras: the names expected (a camera never heard of is reported)."""

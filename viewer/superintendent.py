@@ -28,7 +28,14 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from tracking.estimate import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
+from tracking.estimate import (
+    WITHHELD_BELOW,
+    WITHHELD_CLOCKS,
+    WITHHELD_COMPARING,
+    WITHHELD_SCALE,
+    WITHHELD_SIGMA,
+    ConeEstimate,
+)
 from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_SIDES
 from tracking.live import STALE_S, CameraHealth
 from tracking.rig import Rig
@@ -132,6 +139,10 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
         return WITHHELD_CLOCKS if short else (
             "the topside moves while its cameras' clocks are known only to the rig's time_offset_sigma, so where it "
             "is at a frame's time is not known well enough: measure the clocks with topside sync")
+    if reading.withheld == WITHHELD_COMPARING:
+        return WITHHELD_COMPARING if short else (
+            "two cameras see this cone and one has too few frames yet to tell whether they agree: real lenses put the "
+            "same offset millimetres apart, which no single frame shows (shown in a second or two)")
     if short:  # not the limit: the reading does not say whether the warm-up's or the later one (50 mm) held
         return WITHHELD_SIGMA
     return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for 1 m markers in "

@@ -300,8 +300,6 @@ def _rig_findings(rig_path: Path, report: FilterReport, stats: TrackStats | None
     """After a fused run: a rig error it found (the markers' size, the topside through its cones), which withheld the
     offsets, is one error line and exit status 2; else a warning each for the cameras never placed (with why: where
     the filter had none of its frames, the markers it dropped as seen mirrored) and a scale nothing fixed."""
-    from tracking.estimator.state import NOT_SEEN
-
     if report.scale.mismatch:
         raise InputError(rig_path, report.scale.message() + "; the offsets were withheld", "marker_size")
     if report.below[0]:
@@ -309,10 +307,7 @@ def _rig_findings(rig_path: Path, report: FilterReport, stats: TrackStats | None
                                    "its cone tips, where no set-down can be (withheld): marker_size, a marker's centre "
                                    "or a pair's mated offset is wrong", "marker_size")
     for name, why in report.unplaced.items():
-        mirrored = sorted(i for (cam, i) in (stats.mirrored if stats is not None else {}) if cam == name)
-        if mirrored and why == NOT_SEEN:
-            why = (f"its rig markers ({', '.join(map(str, mirrored))}) were seen only mirrored (the board's back, or a "
-                   "reflection) and nothing confirmed them")
+        why = stats.never_placed(name, why) if stats is not None else why
         err_console.print(f"topside: warning: {name}: never placed, so none of its frames was used: {why}",
                           markup=False)
     if not report.scale.fixed:

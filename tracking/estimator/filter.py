@@ -15,7 +15,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracking.estimate import WITHHELD_BELOW, WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_SIGMA, ConeEstimate
+from tracking.estimate import (
+    WITHHELD_BELOW,
+    WITHHELD_CLOCKS,
+    WITHHELD_COMPARING,
+    WITHHELD_SCALE,
+    WITHHELD_SIGMA,
+    ConeEstimate,
+)
+from tracking.estimator.disagreement import Disagreement
 from tracking.estimator.measurements import Measurement, corner_update, jolted, nearest, pair_rows, renew
 from tracking.estimator.noise import (
     AMBIGUOUS_VARIANCE_GAIN,
@@ -47,6 +55,13 @@ from tracking.scale import ScaleEvidence, below_cones, survey_sample
 
 class TopsideFilter(FilterState):
     """The Kalman filter of one installation: the topside and every camera of the rig."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        pairs: dict[str, list[tuple[int, int]]] = {}
+        for pair in self.rig.all_pairs():
+            pairs.setdefault(pair.cone, []).append((pair.jacket, pair.topside))
+        self.disagreement = Disagreement(*self.cone_rows, pairs)  # the cameras' disagreement at each cone
 
     def predict(self, time: float, frame: Sequence[Measurement] = ()) -> Transition:
         """Move the state to a capture time and renew the corner biases of the views a frame's body observations will
@@ -127,6 +142,7 @@ class TopsideFilter(FilterState):
         cam = self.cameras.get(o.camera)
         if cam is None:
             return False
+        residuals = self.disagreement.residuals(o, *((self.x, self.P) if self.topside_placed else (None, None)))
         self._measure_scale(o)
         cam.corner_noise.add(o.jacket)
         cam.model_px = o.model_px
@@ -162,6 +178,7 @@ class TopsideFilter(FilterState):
         if used_topside:
             self.consecutive_rejects = 0
             self.last_accepted[o.camera] = o.time
+            self.disagreement.record(residuals)
         return used_topside
 
     def _jumped(self, cam: CameraState, view: BodyPose) -> bool:
@@ -240,24 +257,31 @@ class TopsideFilter(FilterState):
 
     def cone_estimates(self, x: np.ndarray | None = None, P: np.ndarray | None = None,
                        time: float | None = None, cameras: tuple[str, ...] | None = None,
-                       warming: bool | None = None) -> list[ConeEstimate]:
-        """Offset and covariance at every cone from a state (default: the current one), withholding cones whose σ
-        exceeds REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_SIDES of a marker side while warming (default: whether the
-        filter is now); from the current state, with the placed cameras' poses (a past state's are relative to
-        nominals since moved)."""
+                       warming: bool | None = None, floors: tuple[np.ndarray, np.ndarray] | None = None
+                       ) -> list[ConeEstimate]:
+        """Offset and covariance at every cone from a state (default: the current one), its variance per axis at least
+        its cameras' disagreement (floors: (C, 3) variances and (C,) cones whose cameras are not yet compared,
+        default: the current ones, tracking.estimator.disagreement), withholding cones whose σ exceeds
+        REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_SIDES of a marker side while warming (default: whether the filter
+        is now), or whose cameras are not yet compared while warming; from the current state, with the placed cameras'
+        poses (a past state's are relative to nominals since moved)."""
         poses = None if x is not None else CameraPoses(
             {name: (cam.T_jacket_camera, cam.index) for name, cam in self.cameras.items()
              if cam.T_jacket_camera is not None}, self.x[:self.body_size].copy())
         x = self.x if x is None else x
         P = self.P if P is None else P
         time = (self.time if time is None else time) or 0.0
+        added, pending = self.disagreement.floors(time) if floors is None else floors
         cameras = self.contributing() if cameras is None else cameras
-        limit = min(REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_SIDES * self.rig.marker_size) \
-            if (self.warming() if warming is None else warming) else REPORT_MAX_SIGMA_M
+        warming = self.warming() if warming is None else warming
+        limit = min(REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_SIDES * self.rig.marker_size) if warming \
+            else REPORT_MAX_SIGMA_M
         clock = self.clock_bound(cameras)
         out = []
         names, H = self.cone_rows
         covs = timeds = H @ P[:STATE, :STATE] @ H.transpose(0, 2, 1)  # (C, 3, 3)
+        if added.any():  # σ at least the cameras' spread (the filter's own σ may hold it already)
+            covs = timeds = covs + np.maximum(added - np.diagonal(covs, axis1=1, axis2=2), 0.0)[:, :, None] * np.eye(3)
         if clock:  # the estimate is the topside's at a time its cameras' clocks hold to σ: its motion over it
             speeds = H[:, :, :6] @ x[6:STATE]
             covs = covs + clock**2 * (speeds[:, :, None] * speeds[:, None, :]
@@ -266,8 +290,9 @@ class TopsideFilter(FilterState):
         sds = np.sqrt(np.diagonal(covs, axis1=1, axis2=2)).tolist()  # (C, 3) σ per axis, and with exact clocks
         timed_sds = sds if timeds is covs else np.sqrt(np.diagonal(timeds, axis1=1, axis2=2)).tolist()
         mismatch = self.scale.mismatch  # every offset scaled: once a time, not once a cone
-        for cone, offset, cov, sd, timed_sd in zip(names, offsets, covs, sds, timed_sds, strict=True):
-            withheld = self._withheld(float(offset[2]), sd, timed_sd, limit, mismatch)
+        for k, (cone, offset, cov, sd, timed_sd) in enumerate(zip(names, offsets, covs, sds, timed_sds, strict=True)):
+            withheld = self._withheld(float(offset[2]), sd, timed_sd, limit, mismatch) or \
+                (WITHHELD_COMPARING if pending[k] else "")
             offset = np.full(3, np.nan) if withheld else offset
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))
         return out

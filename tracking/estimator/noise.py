@@ -148,7 +148,7 @@ def prior_covariance(tuning: FilterTuning) -> np.ndarray:
 
 
 @lru_cache(maxsize=256)
-def _chi2_quantile(dof: int, p: float) -> float:
+def chi2_quantile(dof: int, p: float) -> float:
     """χ² quantile at p over dof degrees of freedom (Wilson-Hilferty, within 1 % from 2 degrees of freedom up)."""
     z = NormalDist().inv_cdf(p)
     return dof * (1.0 - 2.0 / (9 * dof) + z * np.sqrt(2.0 / (9 * dof))) ** 3
@@ -158,7 +158,7 @@ def fits_its_corners(pose: BodyPose, sigma_px: float = CORNER_NOISE_PX) -> bool:
     """Whether a pose's reprojection RMS is what corner noise of sigma_px leaves at PLACEMENT_FIT_P over the corners
     its fit kept."""
     points = 8 * len(pose.marker_ids) - 2 * pose.outliers  # coordinates of the corners the fit kept
-    return pose.reprojection_error**2 * points <= _chi2_quantile(points - 6, PLACEMENT_FIT_P) * sigma_px**2
+    return pose.reprojection_error**2 * points <= chi2_quantile(points - 6, PLACEMENT_FIT_P) * sigma_px**2
 
 
 @dataclass
@@ -176,7 +176,7 @@ class CornerNoise:
         if pose is None or len(pose.marker_ids) < 2:
             return
         points = 8 * len(pose.marker_ids) - 2 * pose.outliers
-        self.samples.append(pose.reprojection_error**2 * points / _chi2_quantile(points - 6, 0.5))
+        self.samples.append(pose.reprojection_error**2 * points / chi2_quantile(points - 6, 0.5))
 
     @property
     def sigma_px(self) -> float:

@@ -1,0 +1,98 @@
+"""The cameras' disagreement at a cone (tracking/estimator/disagreement.py): a floor under the cone's σ where cameras
+that carry the estimate disagree beyond their noise, nothing where they agree or where a poor view disagrees alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tracking.estimator.disagreement import DISAGREEMENT_WAIT_S, Disagreement
+from tracking.estimator.state import STATE, point_offset_matrix
+from tracking.offsets import BodyObservation
+from tracking.pose import BodyPose, Choice
+
+MM = 1e-3
+RATE_HZ = 15.0
+X = np.zeros(STATE + 6)  # the filter's state: the topside mated (offset zero), one camera
+P = np.eye(STATE + 6) * 1e-10
+
+
+def cone() -> Disagreement:
+    """Cone A at the topside's origin, its pair jacket marker 1 and topside marker 2: its offset is T_jacket_topside's
+    translation."""
+    return Disagreement(["A"], point_offset_matrix(np.zeros(3))[None], {"A": [(1, 2)]})
+
+
+def view(camera: str, time: float, offset_m: np.ndarray, sigma_m: float = 0.5 * MM,
+         choice: Choice = Choice.UNIQUE) -> BodyObservation:
+    """A camera frame 20 m from the markers whose two fits put the topside offset_m (3,) from the jacket."""
+    T_cj = np.eye(4)
+    T_cj[:3, 3] = [0.0, 0.0, 20.0]
+    T_jt = np.eye(4)
+    T_jt[:3, 3] = offset_m
+    cov = np.diag([1e-8] * 3 + [sigma_m**2 / 2] * 3)
+    jacket = BodyPose("jacket", (1,), T_cj, cov, 0.1, Choice.UNIQUE)
+    topside = BodyPose("topside", (2,), T_cj @ T_jt, cov, 0.1, choice)
+    return BodyObservation(time, camera, jacket, topside)
+
+
+def feed(d: Disagreement, camera: str, means_mm: tuple[float, float, float], frames: int, start: float = 0.0,
+         jitter_mm: float = 0.5) -> float:
+    """frames views of one camera: its offsets alternate ±jitter_mm about means_mm; the time after the last."""
+    t = start
+    for i in range(frames):
+        t = start + i / RATE_HZ
+        d.add(view(camera, t, (np.array(means_mm) + (-1) ** i * jitter_mm) * MM), X, P)
+    return t
+
+
+def test_cameras_that_agree_add_nothing() -> None:
+    d = cone()
+    feed(d, "a", (0.0, 0.0, 0.0), 30)
+    t = feed(d, "b", (0.0, 0.0, 0.0), 30, start=0.5 / RATE_HZ)
+    floors, pending = d.floors(t)
+    assert np.array_equal(floors, np.zeros((1, 3))) and not pending[0]
+
+
+def test_cameras_that_disagree_beyond_their_noise_set_the_floor_on_that_axis() -> None:
+    """Two cameras 4 mm apart in x, each ±0.5 mm a frame: their errors' variance is (4 mm)² / 2, and each carries half
+    the estimate, whose error's variance is then half of it: σ 2 mm in x, nothing on y and z."""
+    d = cone()
+    feed(d, "a", (2.0, 0.0, 0.0), 30)
+    t = feed(d, "b", (-2.0, 0.0, 0.0), 30, start=0.5 / RATE_HZ)
+    floors, _ = d.floors(t)
+    assert np.sqrt(floors[0, 0]) == pytest.approx(2.0 * MM, rel=0.1)
+    assert floors[0, 1] == floors[0, 2] == 0.0
+
+
+def test_a_camera_new_to_the_cone_holds_it_back_until_compared_and_not_for_long() -> None:
+    """A second camera's first frame: its noise is not known, so the cone waits for its third frame, then its
+    disagreement counts; one that never gets there (its fits ambiguous) holds it DISAGREEMENT_WAIT_S at most."""
+    d = cone()
+    t = feed(d, "a", (0.0, 0.0, 0.0), 30)
+    d.add(view("b", t + 0.01, np.array([0.0, 3.0, 0.0]) * MM), X, P)
+    assert d.floors(t + 0.01)[1][0]
+    t = feed(d, "b", (0.0, 3.0, 0.0), 3, start=t + 0.02)
+    floors, pending = d.floors(t)
+    assert not pending[0] and np.sqrt(floors[0, 1]) >= 1.0 * MM
+    d.add(view("c", t, np.zeros(3)), None)  # seen before it gave a residual (the topside not placed)
+    assert d.floors(t)[1][0] and not d.floors(t + DISAGREEMENT_WAIT_S + 0.01)[1][0]
+
+
+def test_a_poor_view_that_disagrees_alone_is_not_taken_for_the_others_error() -> None:
+    """A camera whose frames scatter ±50 mm carries under a tenth of the estimate: its 30 mm of disagreement with
+    the camera that carries the rest is its own error."""
+    d = cone()
+    feed(d, "near", (0.0, 0.0, 0.0), 60)
+    t = feed(d, "far", (30.0, 0.0, 0.0), 60, start=0.5 / RATE_HZ, jitter_mm=50.0)
+    floors, _ = d.floors(t)
+    assert np.array_equal(floors, np.zeros((1, 3)))
+
+
+def test_ambiguous_fits_and_views_of_other_pairs_give_nothing() -> None:
+    d = cone()
+    d.add(view("a", 0.0, np.zeros(3), choice=Choice.AMBIGUOUS), X, P)
+    other = view("b", 0.1, np.zeros(3))
+    topside = BodyPose("topside", (7,), other.topside.T_camera_body, other.topside.covariance, 0.1, Choice.UNIQUE)
+    d.add(BodyObservation(0.1, "b", other.jacket, topside), X, P)
+    assert not d.moments and not d.seen

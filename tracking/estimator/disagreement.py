@@ -1,0 +1,199 @@
+"""How much the cameras that see a cone disagree beyond their noise: a floor under the cone's σ.
+
+The filter weighs each camera's frames as if the part of their errors it does not model as persistent (the views'
+biases) averaged away over time. A camera's model error does not (a calibration that maps one part of the picture
+a few tenths of a pixel off, a board that is not flat): real webcams' own offsets keep means 1-2 mm apart for a
+whole session where one frame's σ is 1-2 mm (caliscope's 4_cam_recording), and the filter's σ then shrank to a
+tenth of its error. Different cameras' model errors differ, so they show as cameras whose offsets disagree, which
+the filter's σ alone does not say.
+
+Each camera frame that shows a pair (both its markers) and whose two fits IPPE settled gives its own offset at the
+pair's cone, from its T_jacket_topside, linear in the pose as the filter's offsets are (point_offset_matrix); its
+residual r (3,) against the filter's before the frame (kept where the filter used the frame's topside corners), and
+its σ² from the fits' covariances and the filter's own. Per camera and cone, a mean and variance of r weighted by
+the residuals' precision (1 / σ²: a frame of a far or grazing view, or one while the filter still settles, counts
+little) and by age (time constant DISAGREEMENT_TAU_S), and its effective number of frames n. Over the cameras of a
+cone with DISAGREEMENT_MIN_FRAMES or more, seen within DISAGREEMENT_WINDOW_S, that carry DISAGREEMENT_MIN_SHARE of
+its estimate or more (w_c: their frames over their residuals' scatter, so a poor view's own error is not taken for
+the others'), the random-effects estimate of the variance of their persistent errors, per axis: B = var_c(mean_c) -
+mean_c(var_c / n_c), where it is significant (var_c(mean_c) beyond the noise term's DISAGREEMENT_P quantile), else
+0. The estimate holds each camera's error in its share w_c, so its error's variance is B Σ w_c²: a cone's reported
+variance is at least that. Cameras that agree, or a cone one camera sees, add nothing. A cone that a camera new to
+it sees is not shown until that camera is compared, for DISAGREEMENT_WAIT_S at most (the first frames of two webcams
+put the board's halves 5-10σ apart before anything said they disagree; a third joining later pulled them 5σ off).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracking.estimator.noise import chi2_quantile
+from tracking.estimator.state import STATE
+from tracking.geometry import from_params, inverse, numeric_jacobian, pose_params
+from tracking.offsets import BodyObservation
+from tracking.pose import Choice
+
+DISAGREEMENT_TAU_S = 5.0  # s: a camera's model error stays while its view of the markers does (seconds at least);
+# shorter than a lift's phases, so a camera whose view changed is judged on its new view
+DISAGREEMENT_MIN_FRAMES = 2.5  # frames weighed by age (three recent ones) before a camera's noise is told from its
+# bias: half a second of 6 fps webcams
+DISAGREEMENT_MIN_SHARE = 0.1  # a camera whose frames carry less of a cone's estimate is not compared: its own bias
+# moves the estimate little, and a view that much poorer disagrees by its own error (a far stern camera 70 mm off where
+# the near one carrying 98 % of the estimate agrees with it)
+DISAGREEMENT_WINDOW_S = 2.0  # a camera counts for a cone while its last frame of it is this recent
+DISAGREEMENT_WAIT_S = 0.5  # a cone waits this long at most for a camera new to it to be compared (a camera whose fits
+# are ambiguous, or that shows the cone for a frame or two, must not hide it for long)
+CHI2_1_95 = 3.841  # χ² 1 degree of freedom at 95 % (chi2_quantile holds from 2)
+DISAGREEMENT_P = 0.95  # the cameras' means must scatter beyond what their noise gives at this probability (χ² over
+# cameras - 1 degrees of freedom) before their spread counts: unbiased cameras must not widen σ by chance
+
+
+@dataclass
+class _Moments:
+    """Exponentially weighted moments of one camera's residuals at one cone."""
+
+    time: float
+    count: float = 0.0  # its frames, each weighed by age alone
+    known: bool = False  # it once had DISAGREEMENT_MIN_FRAMES: back after a gap, its noise is known
+    w: float = 0.0  # Σ weights
+    w2: float = 0.0  # Σ weights²
+    s1: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r
+    s2: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r²
+
+
+    def add(self, time: float, r: np.ndarray, weight: float) -> None:
+        k = float(np.exp(-max(0.0, time - self.time) / DISAGREEMENT_TAU_S))
+        self.count = k * self.count + 1.0
+        self.known = self.known or self.count >= DISAGREEMENT_MIN_FRAMES
+        self.w, self.w2 = k * self.w + weight, k * k * self.w2 + weight * weight
+        self.s1, self.s2 = k * self.s1 + weight * r, k * self.s2 + weight * r * r
+        self.time = time
+
+    @property
+    def frames(self) -> float:
+        """Effective number of frames, (Σw)² / Σw²."""
+        return self.w * self.w / self.w2 if self.w2 else 0.0
+
+    @property
+    def mean(self) -> np.ndarray:
+        return self.s1 / self.w
+
+    @property
+    def scatter(self) -> np.ndarray:
+        """(3,) variance of one frame's residual about the mean."""
+        return np.maximum(self.s2 / self.w - self.mean**2, 0.0)
+
+    @property
+    def noise(self) -> np.ndarray:
+        """(3,) variance of the mean from the residuals' scatter."""
+        return self.scatter / max(self.frames - 1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """One camera frame's view of the cones: those its two fits show (indices), and its residual (3,) and weight (1 /
+    σ²) at each where the filter had an estimate."""
+
+    camera: str
+    time: float
+    seen: list[int]
+    residuals: list[tuple[int, np.ndarray, float]]
+
+
+@dataclass
+class Disagreement:
+    """The cameras' residuals at each cone (names and H: the cones in the filter's order, FilterState.cone_rows;
+    pairs: per cone the (jacket, topside) marker ids whose view shows it)."""
+
+    names: list[str]
+    H: np.ndarray  # (C, 3, 12) the cones' offsets from the topside's state (point_offset_matrix)
+    pairs: dict[str, list[tuple[int, int]]]
+    moments: dict[tuple[str, str], _Moments] = field(default_factory=dict)  # (camera, cone) ->
+    seen: dict[tuple[str, str], float] = field(default_factory=dict)  # (camera, cone) -> time of its last view
+    first_seen: dict[tuple[str, str], float] = field(default_factory=dict)  # (camera, cone) -> of its first
+
+    def residuals(self, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None) -> Residuals:
+        """A camera frame's own offset at each cone whose pair it shows, against the state x's (n,) with covariance P
+        before the frame (None: the topside not placed yet, the view only noted); kept by record. A frame whose fit
+        IPPE could not settle gives nothing (its pose may be the wrong one of two)."""
+        if o.jacket is None or o.topside is None or Choice.AMBIGUOUS in (o.jacket.choice, o.topside.choice):
+            return Residuals(o.camera, o.time, [], [])
+        seen = [k for k, cone in enumerate(self.names) if any(j in o.jacket.marker_ids and t in o.topside.marker_ids
+                                                              for j, t in self.pairs.get(cone, ()))]
+        if not seen or x is None or P is None:
+            return Residuals(o.camera, o.time, seen, [])
+        return Residuals(o.camera, o.time, seen, self._posed(o, seen, x, P))
+
+    def _posed(self, o: BodyObservation, seen: list[int], x: np.ndarray, P: np.ndarray
+               ) -> list[tuple[int, np.ndarray, float]]:
+        """Residuals at the cones from the frame's T_jacket_topside (its two fits), linear in the pose as the
+        filter's offsets are (point_offset_matrix)."""
+        assert o.jacket is not None and o.topside is not None
+        rows = self.H[seen]  # (S, 3, 12)
+
+        def offsets(p: np.ndarray) -> np.ndarray:  # (6 + 6,) T_camera_jacket, T_camera_topside -> (3 S,)
+            q = pose_params(inverse(from_params(p[:6])) @ from_params(p[6:]))  # rvec, t of T_jacket_topside
+            own = np.zeros(STATE)
+            own[:3], own[3:6] = q[3:], q[:3]
+            return (rows @ own).ravel()
+
+        p0 = np.concatenate([pose_params(o.jacket.T_camera_body), pose_params(o.topside.T_camera_body)])
+        J = numeric_jacobian(offsets, p0)
+        cov = J[:, :6] @ o.jacket.covariance @ J[:, :6].T + J[:, 6:] @ o.topside.covariance @ J[:, 6:].T
+        own = offsets(p0).reshape(-1, 3)
+        out = []
+        for i, k in enumerate(seen):
+            filtered = self.H[k] @ P[:STATE, :STATE] @ self.H[k].T  # the filter's own σ² at the cone
+            variance = float(np.trace(cov[3 * i:3 * i + 3, 3 * i:3 * i + 3] + filtered))
+            if np.isfinite(variance) and variance > 0.0:
+                out.append((k, own[i] - self.H[k] @ x[:STATE], 1.0 / variance))
+        return out
+
+    def record(self, r: Residuals) -> None:
+        """Keep a frame's residuals: the filter used its topside corners (a view it refused makes no estimate)."""
+        for k in r.seen:
+            key = (r.camera, self.names[k])
+            self.seen[key] = r.time
+            self.first_seen.setdefault(key, r.time)
+        for k, residual, weight in r.residuals:
+            key = (r.camera, self.names[k])
+            if key not in self.moments:
+                self.moments[key] = _Moments(r.time)
+            self.moments[key].add(r.time, residual, weight)
+
+    def add(self, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None) -> None:
+        """A frame's residuals, kept."""
+        self.record(self.residuals(o, x, P))
+
+    def floors(self, time: float) -> tuple[np.ndarray, np.ndarray]:
+        """(C, 3) variance, m², each cone's σ² is at least for its cameras' disagreement at a time; and (C,) whether a
+        cone waits for a camera new to it to be compared (DISAGREEMENT_WAIT_S at most)."""
+        out, pending = np.zeros((len(self.names), 3)), np.zeros(len(self.names), dtype=bool)
+        for k, cone in enumerate(self.names):
+            recent = [key for key, t in self.seen.items() if key[1] == cone and time - t <= DISAGREEMENT_WINDOW_S]
+            ms = [m for key in recent if (m := self.moments.get(key)) is not None]
+            pending[k] = len(recent) >= 2 and any(  # a camera new to the cone whose noise is not known yet
+                (key not in self.moments or not self.moments[key].known)
+                and time - self.first_seen[key] <= DISAGREEMENT_WAIT_S for key in recent)
+            out[k] = _compared([m for m in ms if m.count >= DISAGREEMENT_MIN_FRAMES])
+        return out, pending
+
+
+def _compared(ms: list[_Moments]) -> np.ndarray:
+    """(3,) variance of the estimate's error the persistent disagreement of cameras with frames enough gives, m²."""
+    if len(ms) < 2:
+        return np.zeros(3)
+    precision = np.array([m.frames / max(float(m.scatter.sum()), 1e-12) for m in ms])
+    keep = precision >= DISAGREEMENT_MIN_SHARE * precision.sum()  # the cameras that make the estimate
+    ms, precision = [m for m, kept in zip(ms, keep, strict=True) if kept], precision[keep]
+    if len(ms) < 2:
+        return np.zeros(3)
+    means = np.array([m.mean for m in ms])
+    between = means.var(axis=0, ddof=1)
+    noise = np.mean([m.noise for m in ms], axis=0)
+    dof = len(ms) - 1
+    significant = chi2_quantile(dof, DISAGREEMENT_P) / dof if dof > 1 else CHI2_1_95
+    shares = precision / precision.sum()  # each camera's share of the estimate
+    return np.where(between > significant * noise, between - noise, 0.0) * float(shares @ shares)
