@@ -553,7 +553,7 @@ CONES_LINE = re.compile(r"cones: A (GREEN|AMBER|RED) (\d+)±(\d+) mm \(Δx ([+-]
 def test_live_prints_the_cones_in_a_log(installation: Path, tmp_path: Path) -> None:
     """live with its output piped: the cones' line, timestamped, every progress interval (0.2 s here): NO DATA and
     why before the first measurement, then the offsets in mm (the truth: Δz 400 mm throughout)."""
-    code, out, lines = piped(["live", *RIG, "--rrd", str(tmp_path / "l.rrd"), "--speed", "0.5"], installation, 0.2)
+    code, out, lines = piped(["live", *RIG, "--rrd", str(tmp_path / "l.rrd"), "--speed", "0.25"], installation, 0.2)
     assert code == 0, lines
     cones = [m[2] for _, line in lines if (m := PROGRESS_LINE.match(line)) and m[2].startswith("cones: ")]
     assert cones and cones[0] == "cones: A NO DATA (no measurement yet)", lines

@@ -114,12 +114,14 @@ def test_a_window_of_the_segments(live_run: Path, tmp_path: Path) -> None:
     from viewer.playback import window_recording
 
     index = pd.read_csv(live_run / "live.segments.csv")
-    start, end = index["start"].iloc[1] + 0.05, index["end"].iloc[1] - 0.05
+    everything = pd.read_csv(live_run / "offsets.csv").query("cone == 'A'").dropna(subset=["dx", "dy", "dz"])
+    first = float(everything["time"].min())  # the first offset shown (the cone waited for its cameras' comparison)
+    k = int(np.searchsorted(index["start"].to_numpy(), first, side="right")) - 1  # the segment it is in
+    start, end = first + 0.05, index["end"].iloc[k] - 0.02
     window = window_recording(live_run / "live.rrd", start, end, tmp_path)
     chunks = chunks_by_entity(window)
     times, _ = component_rows(chunks["/offsets/dx/A/estimate"], "Scalars:scalars")
     assert times.size and times.max() <= end + 1e-6
     assert times.min() <= start  # opened at the keyframe before --from, so the video decodes from the first frame
-    everything = pd.read_csv(live_run / "offsets.csv").query("cone == 'A'").dropna(subset=["dx", "dy", "dz"])
     assert times.size < len(everything)
     assert "/world/cameras/cam-port" in chunks  # static data comes along

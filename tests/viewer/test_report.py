@@ -62,8 +62,10 @@ def test_the_recording_and_its_archive_give_the_same_report(archived: Archived, 
     summary = summary_of(rrd)
     (cone,) = summary.cones
     assert cone.verdict == Verdict.NOT_LANDED  # the clip hovers 0.4 m above cone A
-    assert cone.closest is not None and 0.2 < cone.closest.concentricity < 0.35  # the ramp passes ~0.27 m off
-    assert [p.what for p in cone.no_data] == ["σ too large"]  # the first frames, before the second camera
+    assert cone.closest is not None and 0.2 < cone.closest.concentricity < 0.5  # the ramp passes ~0.27 m off, in
+    # the frames before cam-ahead (its lone marker seldom settled by IPPE) is compared, and 0.45 m at the first shown
+    assert [p.what for p in cone.no_data] == ["σ too large", "cameras not yet compared"]  # before the second
+    # camera, then before the two are compared
     out, pdf = tmp_path / "report.html", tmp_path / "report.pdf"
     proc = subprocess.run([*TOPSIDE, "report", str(archived.mcap), "-o", str(out), "--pdf", str(pdf)],
                           capture_output=True, text=True, timeout=120, cwd=REPO)
@@ -167,7 +169,7 @@ def test_the_report_opens_offline_in_chromium(dropout: tuple[Path, Path], tmp_pa
     def pixels(rgb: tuple[int, int, int]) -> int:
         return int(np.all(np.abs(page.image.astype(int) - rgb) < 30, axis=2).sum())
 
-    assert pixels((31, 95, 191)) > 150  # the concentricity line (its parts before and after the dropout)
+    assert pixels((31, 95, 191)) > 40  # the concentricity line (its parts before and after the dropout)
     assert pixels((230, 40, 40)) > 2000  # the tolerance line, the lost camera's bar
 
 
