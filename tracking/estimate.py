@@ -12,8 +12,8 @@ TOLERANCE_M = 0.150  # concentricity requirement (paper, section I-D): the band 
 WITHHELD_SIGMA = "σ too large"  # the cameras do not see the cone well enough
 WITHHELD_CLOCKS = "clocks not measured"  # σ within bounds but for the topside's motion over its cameras' clock σ
 WITHHELD_SCALE = "rig error: marker size"  # the markers do not look the size the rig states (tracking.scale)
-WITHHELD_COMPARING = "cameras not yet compared"  # warming, two cameras see the cone and one has too few frames to tell
-# whether they disagree beyond their noise (tracking.estimator.disagreement)
+WITHHELD_COMPARING = "cameras not yet compared"  # two cameras see the cone and one new to it has too few frames yet to
+# tell whether they disagree beyond their noise, for half a second at most (tracking.estimator.disagreement)
 WITHHELD_BELOW = "rig error: through the cones"  # the offset puts the topside below its cone tips: no set-down can
 
 

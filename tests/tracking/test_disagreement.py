@@ -96,3 +96,31 @@ def test_ambiguous_fits_and_views_of_other_pairs_give_nothing() -> None:
     topside = BodyPose("topside", (7,), other.topside.T_camera_body, other.topside.covariance, 0.1, Choice.UNIQUE)
     d.add(BodyObservation(0.1, "b", other.jacket, topside), X, P)
     assert not d.moments and not d.seen
+
+
+def test_the_relative_poses_jacobian_is_the_derivative_of_the_offset_it_feeds() -> None:
+    """The analytic (6, 12) Jacobian against finite differences of T_jacket_topside's translation and its rotation
+    vector, for poses turned far from the identity (the fits' covariances are in their rvec, tvec)."""
+    from tracking.estimator.disagreement import relative_pose_jacobian
+    from tracking.geometry import from_params, inverse, numeric_jacobian, pose_params
+
+    p0 = np.array([0.4, -1.2, 2.0, 1.5, -0.3, 22.0, 0.5, -1.1, 2.1, 1.4, 2.6, 21.0])
+
+    def relative(p: np.ndarray) -> np.ndarray:
+        T = inverse(from_params(p[:6])) @ from_params(p[6:])
+        return np.concatenate([T[:3, 3], pose_params(T)[:3]])
+
+    numeric = numeric_jacobian(relative, p0, 1e-7)
+    T0 = inverse(from_params(p0[:6])) @ from_params(p0[6:])
+    R0 = T0[:3, :3]  # the state's rotation vector changes by the turn ψ where the relative rotation is small; here it
+    # is not, so compare turns: δR R0ᵀ of the numeric change
+    turns = []
+    for k in range(12):
+        dp = np.zeros(12)
+        dp[k] = 1e-7
+        T = inverse(from_params((p0 + dp)[:6])) @ from_params((p0 + dp)[6:])
+        M = (T[:3, :3] - R0) @ R0.T / 1e-7
+        turns.append([M[2, 1], M[0, 2], M[1, 0]])
+    analytic = relative_pose_jacobian(from_params(p0[:6]), from_params(p0[6:]))
+    np.testing.assert_allclose(analytic[:3], numeric[:3], atol=2e-5)
+    np.testing.assert_allclose(analytic[3:], np.array(turns).T, atol=2e-5)

@@ -814,3 +814,23 @@ def test_the_cameras_poses_an_estimate_holds_are_those_of_its_time() -> None:
         assert all(np.array_equal(poses[name], T) for name, T in then.items())
     first, last = held[0][1], held[-1][1]
     assert any(not np.array_equal(first[name], last[name]) for name in first if name in last)  # the poses did move
+
+
+def test_the_cameras_disagreement_floors_a_cones_sigma_and_their_comparison_holds_it_back() -> None:
+    """A floor raises σ only where the filter's own is smaller (a floor, not an addition); a cone whose cameras are
+    not yet compared is withheld and says so; σ too large says that first."""
+    from tracking.estimate import WITHHELD_COMPARING, WITHHELD_SIGMA
+    from tracking.estimator.noise import STATE
+
+    kf = TopsideFilter(camera_rig())
+    P = kf.P.copy()
+    P[:STATE, :STATE] = np.diag([0.005**2] * 3 + [1e-12] * 3 + [1e-6] * 6)  # the topside's position to 5 mm
+    cones = len(kf.cone_rows[0])
+    added = np.tile([0.010**2, 0.001**2, 0.0], (cones, 1))  # x: 10 mm of disagreement; y: 1 mm, under its own σ
+    for e in kf.cone_estimates(kf.x, P, 0.0, (), warming=False, floors=(added, np.zeros(cones, dtype=bool))):
+        sd = np.sqrt(np.diag(e.covariance))
+        assert sd[0] == pytest.approx(0.010, rel=1e-6) and sd[1] == pytest.approx(0.005, rel=1e-3) and not e.withheld
+    waiting = kf.cone_estimates(kf.x, P, 0.0, (), warming=False, floors=(added * 0, np.ones(cones, dtype=bool)))
+    assert {e.withheld for e in waiting} == {WITHHELD_COMPARING} and all(np.isnan(e.offset).all() for e in waiting)
+    wide = kf.cone_estimates(kf.x, P, 0.0, (), warming=False, floors=(added * 100, np.ones(cones, dtype=bool)))
+    assert {e.withheld for e in wide} == {WITHHELD_SIGMA}

@@ -26,12 +26,13 @@ put the board's halves 5-10σ apart before anything said they disagree; a third 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from statistics import NormalDist
 
 import numpy as np
 
 from tracking.estimator.noise import chi2_quantile
 from tracking.estimator.state import STATE
-from tracking.geometry import from_params, inverse, numeric_jacobian, pose_params
+from tracking.geometry import inverse, rotation_jacobian_of, rotvec, skew
 from tracking.offsets import BodyObservation
 from tracking.pose import Choice
 
@@ -45,7 +46,6 @@ DISAGREEMENT_MIN_SHARE = 0.1  # a camera whose frames carry less of a cone's est
 DISAGREEMENT_WINDOW_S = 2.0  # a camera counts for a cone while its last frame of it is this recent
 DISAGREEMENT_WAIT_S = 0.5  # a cone waits this long at most for a camera new to it to be compared (a camera whose fits
 # are ambiguous, or that shows the cone for a frame or two, must not hide it for long)
-CHI2_1_95 = 3.841  # χ² 1 degree of freedom at 95 % (chi2_quantile holds from 2)
 DISAGREEMENT_P = 0.95  # the cameras' means must scatter beyond what their noise gives at this probability (χ² over
 # cameras - 1 degrees of freedom) before their spread counts: unbiased cameras must not widen σ by chance
 
@@ -113,6 +113,9 @@ class Disagreement:
     moments: dict[tuple[str, str], _Moments] = field(default_factory=dict)  # (camera, cone) ->
     seen: dict[tuple[str, str], float] = field(default_factory=dict)  # (camera, cone) -> time of its last view
     first_seen: dict[tuple[str, str], float] = field(default_factory=dict)  # (camera, cone) -> of its first
+    by_cone: dict[int, dict[str, float]] = field(default_factory=dict)  # cone index -> camera -> its last view
+    versions: dict[int, int] = field(default_factory=dict)  # cone index -> residuals kept so far
+    _cache: dict[int, tuple] = field(default_factory=dict)  # cone index -> ((cameras, version), its floor (3,))
 
     def residuals(self, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None) -> Residuals:
         """A camera frame's own offset at each cone whose pair it shows, against the state x's (n,) with covariance P
@@ -129,39 +132,32 @@ class Disagreement:
     def _posed(self, o: BodyObservation, seen: list[int], x: np.ndarray, P: np.ndarray
                ) -> list[tuple[int, np.ndarray, float]]:
         """Residuals at the cones from the frame's T_jacket_topside (its two fits), linear in the pose as the
-        filter's offsets are (point_offset_matrix)."""
+        filter's offsets are (point_offset_matrix), with their σ² from the fits' covariances (first order)."""
         assert o.jacket is not None and o.topside is not None
-        rows = self.H[seen]  # (S, 3, 12)
-
-        def offsets(p: np.ndarray) -> np.ndarray:  # (6 + 6,) T_camera_jacket, T_camera_topside -> (3 S,)
-            q = pose_params(inverse(from_params(p[:6])) @ from_params(p[6:]))  # rvec, t of T_jacket_topside
-            own = np.zeros(STATE)
-            own[:3], own[3:6] = q[3:], q[:3]
-            return (rows @ own).ravel()
-
-        p0 = np.concatenate([pose_params(o.jacket.T_camera_body), pose_params(o.topside.T_camera_body)])
-        J = numeric_jacobian(offsets, p0)
-        cov = J[:, :6] @ o.jacket.covariance @ J[:, :6].T + J[:, 6:] @ o.topside.covariance @ J[:, 6:].T
-        own = offsets(p0).reshape(-1, 3)
-        out = []
-        for i, k in enumerate(seen):
-            filtered = self.H[k] @ P[:STATE, :STATE] @ self.H[k].T  # the filter's own σ² at the cone
-            variance = float(np.trace(cov[3 * i:3 * i + 3, 3 * i:3 * i + 3] + filtered))
-            if np.isfinite(variance) and variance > 0.0:
-                out.append((k, own[i] - self.H[k] @ x[:STATE], 1.0 / variance))
-        return out
+        T = inverse(o.jacket.T_camera_body) @ o.topside.T_camera_body
+        own = np.zeros(STATE)
+        own[:3], own[3:6] = T[:3, 3], rotvec(T[:3, :3])
+        G = relative_pose_jacobian(o.jacket.T_camera_body, o.topside.T_camera_body)  # (6, 12)
+        cov = G[:, :6] @ o.jacket.covariance @ G[:, :6].T + G[:, 6:] @ o.topside.covariance @ G[:, 6:].T
+        H = self.H[seen]  # (S, 3, 12)
+        fits = np.einsum("sij,jk,sik->s", H[:, :, :6], cov, H[:, :, :6])  # traces: the fits' σ² at each cone
+        filtered = np.einsum("sij,jk,sik->s", H, P[:STATE, :STATE], H)  # and the filter's own
+        residuals = H @ (own - x[:STATE])
+        return [(k, residuals[i], 1.0 / v) for i, (k, v) in enumerate(zip(seen, fits + filtered, strict=True))
+                if np.isfinite(v) and v > 1e-18 and np.isfinite(residuals[i]).all()]  # a NaN would stay for good
 
     def record(self, r: Residuals) -> None:
         """Keep a frame's residuals: the filter used its topside corners (a view it refused makes no estimate)."""
         for k in r.seen:
             key = (r.camera, self.names[k])
-            self.seen[key] = r.time
+            self.seen[key] = self.by_cone.setdefault(k, {})[r.camera] = r.time
             self.first_seen.setdefault(key, r.time)
         for k, residual, weight in r.residuals:
             key = (r.camera, self.names[k])
             if key not in self.moments:
                 self.moments[key] = _Moments(r.time)
             self.moments[key].add(r.time, residual, weight)
+            self.versions[k] = self.versions.get(k, 0) + 1
 
     def add(self, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None) -> None:
         """A frame's residuals, kept."""
@@ -171,14 +167,40 @@ class Disagreement:
         """(C, 3) variance, m², each cone's σ² is at least for its cameras' disagreement at a time; and (C,) whether a
         cone waits for a camera new to it to be compared (DISAGREEMENT_WAIT_S at most)."""
         out, pending = np.zeros((len(self.names), 3)), np.zeros(len(self.names), dtype=bool)
-        for k, cone in enumerate(self.names):
-            recent = [key for key, t in self.seen.items() if key[1] == cone and time - t <= DISAGREEMENT_WINDOW_S]
-            ms = [m for key in recent if (m := self.moments.get(key)) is not None]
-            pending[k] = len(recent) >= 2 and any(  # a camera new to the cone whose noise is not known yet
-                (key not in self.moments or not self.moments[key].known)
-                and time - self.first_seen[key] <= DISAGREEMENT_WAIT_S for key in recent)
-            out[k] = _compared([m for m in ms if m.count >= DISAGREEMENT_MIN_FRAMES])
+        for k, cameras in self.by_cone.items():
+            recent = [c for c, t in cameras.items() if time - t <= DISAGREEMENT_WINDOW_S]
+            if len(recent) < 2:
+                continue
+            cone = self.names[k]
+            ms = {c: self.moments.get((c, cone)) for c in recent}
+            pending[k] = any((m is None or not m.known) and time - self.first_seen[(c, cone)] <= DISAGREEMENT_WAIT_S
+                             for c, m in ms.items())  # a camera new to the cone whose noise is not known yet
+            compared = tuple(c for c, m in ms.items() if m is not None and m.count >= DISAGREEMENT_MIN_FRAMES)
+            key = (compared, self.versions.get(k, 0))
+            if self._cache.get(k, (None,))[0] != key:  # the moments changed since: compare again
+                self._cache[k] = (key, _compared([ms[c] for c in compared]))
+            out[k] = self._cache[k][1]
         return out, pending
+
+def relative_pose_jacobian(T_camera_jacket: np.ndarray, T_camera_topside: np.ndarray) -> np.ndarray:
+    """(6, 12) first-order change of T_jacket_topside = T_camera_jacket⁻¹ T_camera_topside, as its translation and a
+    rotation vector turning it in the jacket frame, with the two poses' (rvec, tvec) each (the fits' covariances'
+    parameters): δt = Rⱼᵀ (δt_t - δt_j) + Rⱼᵀ [t_t - t_j]× φⱼ, ψ = Rⱼᵀ (φ_t - φⱼ), φ = L(rvec) δrvec the turn in the
+    camera (L from OpenCV's Rodrigues Jacobian)."""
+    R_j = T_camera_jacket[:3, :3]
+    L_j, L_t = _turn(rotvec(R_j)), _turn(rotvec(T_camera_topside[:3, :3]))
+    G = np.zeros((6, 12))
+    G[:3, 0:3] = R_j.T @ skew(T_camera_topside[:3, 3] - T_camera_jacket[:3, 3]) @ L_j
+    G[:3, 3:6], G[:3, 9:12] = -R_j.T, R_j.T
+    G[3:, 0:3], G[3:, 6:9] = -R_j.T @ L_j, R_j.T @ L_t
+    return G
+
+
+def _turn(rvec: np.ndarray) -> np.ndarray:
+    """(3, 3) L: the turn φ (3,) in the parent frame that a change δrvec of a rotation vector makes, φ = L δrvec."""
+    R, dR = rotation_jacobian_of(rvec)
+    turns = dR @ R.T  # (3, 3, 3): [φ_k]× per rotation-vector component
+    return np.stack([turns[:, 2, 1], turns[:, 0, 2], turns[:, 1, 0]])  # rows: φ's axes; columns: δrvec's
 
 
 def _compared(ms: list[_Moments]) -> np.ndarray:
@@ -194,6 +216,7 @@ def _compared(ms: list[_Moments]) -> np.ndarray:
     between = means.var(axis=0, ddof=1)
     noise = np.mean([m.noise for m in ms], axis=0)
     dof = len(ms) - 1
-    significant = chi2_quantile(dof, DISAGREEMENT_P) / dof if dof > 1 else CHI2_1_95
+    significant = chi2_quantile(dof, DISAGREEMENT_P) / dof if dof > 1 else \
+        NormalDist().inv_cdf((1.0 + DISAGREEMENT_P) / 2.0) ** 2  # one degree of freedom: a squared normal
     shares = precision / precision.sum()  # each camera's share of the estimate
     return np.where(between > significant * noise, between - noise, 0.0) * float(shares @ shares)

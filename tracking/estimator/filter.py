@@ -263,15 +263,18 @@ class TopsideFilter(FilterState):
         its cameras' disagreement (floors: (C, 3) variances and (C,) cones whose cameras are not yet compared,
         default: the current ones, tracking.estimator.disagreement), withholding cones whose σ exceeds
         REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_SIDES of a marker side while warming (default: whether the filter
-        is now), or whose cameras are not yet compared while warming; from the current state, with the placed cameras'
-        poses (a past state's are relative to nominals since moved)."""
+        is now), or whose cameras are not yet compared; from the current state, with the placed cameras' poses (a past
+        state's are relative to nominals since moved). A past state without its floors gets none."""
         poses = None if x is not None else CameraPoses(
             {name: (cam.T_jacket_camera, cam.index) for name, cam in self.cameras.items()
              if cam.T_jacket_camera is not None}, self.x[:self.body_size].copy())
+        if floors is None:  # the current disagreement belongs to the current state alone
+            floors = self.disagreement.floors(self.time or 0.0) if x is None else \
+                (np.zeros((len(self.cone_rows[0]), 3)), np.zeros(len(self.cone_rows[0]), dtype=bool))
         x = self.x if x is None else x
         P = self.P if P is None else P
         time = (self.time if time is None else time) or 0.0
-        added, pending = self.disagreement.floors(time) if floors is None else floors
+        added, pending = floors
         cameras = self.contributing() if cameras is None else cameras
         warming = self.warming() if warming is None else warming
         limit = min(REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_SIDES * self.rig.marker_size) if warming \
@@ -281,7 +284,7 @@ class TopsideFilter(FilterState):
         names, H = self.cone_rows
         covs = timeds = H @ P[:STATE, :STATE] @ H.transpose(0, 2, 1)  # (C, 3, 3)
         if added.any():  # σ at least the cameras' spread (the filter's own σ may hold it already)
-            covs = timeds = covs + np.maximum(added - np.diagonal(covs, axis1=1, axis2=2), 0.0)[:, :, None] * np.eye(3)
+            covs = timeds = covs + np.fmax(added - np.diagonal(covs, axis1=1, axis2=2), 0.0)[:, :, None] * np.eye(3)
         if clock:  # the estimate is the topside's at a time its cameras' clocks hold to σ: its motion over it
             speeds = H[:, :, :6] @ x[6:STATE]
             covs = covs + clock**2 * (speeds[:, :, None] * speeds[:, None, :]
