@@ -23,8 +23,8 @@ def test_the_live_web_view_shows_every_cone_panel_on_a_tablet(installation: Path
     web_port, grpc_port = free_port(), free_port()
     proc = subprocess.Popen([sys.executable, "-m", "tracking.cli", "live", "--rig", str(installation / "rig.yaml"),
                              "--rrd", str(tmp_path / "live.rrd"), "--web", "--web-port", str(web_port),
-                             "--grpc-port", str(grpc_port), "--speed", "0.05"],  # 0.8 s of video over 16 s
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--grpc-port", str(grpc_port), "--speed", "0.03"],  # 0.8 s of video over 27 s: its cone
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # shown for its last 0.2 s (7 s)
     try:
         deadline = time.monotonic() + START_TIMEOUT_S
         line = ""
