@@ -175,12 +175,13 @@ class Disagreement:
             ms = {c: self.moments.get((c, cone)) for c in recent}
             pending[k] = any((m is None or not m.known) and time - self.first_seen[(c, cone)] <= DISAGREEMENT_WAIT_S
                              for c, m in ms.items())  # a camera new to the cone whose noise is not known yet
-            compared = tuple(c for c, m in ms.items() if m is not None and m.count >= DISAGREEMENT_MIN_FRAMES)
-            key = (compared, self.versions.get(k, 0))
+            compared = {c: m for c, m in ms.items() if m is not None and m.count >= DISAGREEMENT_MIN_FRAMES}
+            key = (tuple(compared), self.versions.get(k, 0))
             if self._cache.get(k, (None,))[0] != key:  # the moments changed since: compare again
-                self._cache[k] = (key, _compared([ms[c] for c in compared]))
+                self._cache[k] = (key, _compared(list(compared.values())))
             out[k] = self._cache[k][1]
         return out, pending
+
 
 def relative_pose_jacobian(T_camera_jacket: np.ndarray, T_camera_topside: np.ndarray) -> np.ndarray:
     """(6, 12) first-order change of T_jacket_topside = T_camera_jacket⁻¹ T_camera_topside, as its translation and a
