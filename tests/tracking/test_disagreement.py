@@ -124,3 +124,23 @@ def test_the_relative_poses_jacobian_is_the_derivative_of_the_offset_it_feeds() 
     analytic = relative_pose_jacobian(from_params(p0[:6]), from_params(p0[6:]))
     np.testing.assert_allclose(analytic[:3], numeric[:3], atol=2e-5)
     np.testing.assert_allclose(analytic[3:], np.array(turns).T, atol=2e-5)
+
+
+def test_a_frames_residual_is_its_own_offset_at_the_cone_less_the_filters() -> None:
+    """A turned camera, a cone off the topside's origin, a turned topside: the residual is H [t, rvec] of the frame's
+    T_jacket_topside less H x, with H the cone's offset matrix (its sign and frames, not only its variance)."""
+    from tracking.geometry import from_params
+
+    c = np.array([0.5, -0.2, 1.0])
+    d = Disagreement(["A"], point_offset_matrix(c)[None], {"A": [(1, 2)]})
+    T_cj = from_params(np.array([0.3, -0.4, 0.2, 0.1, 0.2, 15.0]))
+    q = np.array([0.01, -0.02, 0.015, 0.02, -0.01, 0.03])  # rvec, t of the true T_jacket_topside
+    o = view("a", 0.0, np.zeros(3))
+    o = BodyObservation(0.0, "a", BodyPose("jacket", (1,), T_cj, o.jacket.covariance, 0.1, Choice.UNIQUE),
+                        BodyPose("topside", (2,), T_cj @ from_params(q), o.topside.covariance, 0.1, Choice.UNIQUE))
+    x = X.copy()
+    x[:3], x[3:6] = [0.01, 0.0, 0.02], [0.0, 0.005, 0.0]
+    d.add(o, x, P)
+    own = np.zeros(STATE)
+    own[:3], own[3:6] = q[3:], q[:3]
+    np.testing.assert_allclose(d.moments[("a", "A")].mean, point_offset_matrix(c) @ (own - x[:STATE]), atol=1e-9)
