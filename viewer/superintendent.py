@@ -142,7 +142,7 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
     if reading.withheld == WITHHELD_COMPARING:
         return WITHHELD_COMPARING if short else (
             "two cameras see this cone and one has too few frames yet to tell whether they agree: real lenses put the "
-            "same offset millimetres apart, which no single frame shows (shown in a second or two)")
+            "same offset millimetres apart, which no single frame shows (shown within half a second)")
     if short:  # not the limit: the reading does not say whether the warm-up's or the later one (50 mm) held
         return WITHHELD_SIGMA
     return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for 1 m markers in "

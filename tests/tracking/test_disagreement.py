@@ -36,13 +36,18 @@ def view(camera: str, time: float, offset_m: np.ndarray, sigma_m: float = 0.5 * 
     return BodyObservation(time, camera, jacket, topside)
 
 
+def keep(d: Disagreement, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None) -> None:
+    """A frame's residuals, kept as the filter keeps them (it used the frame's topside corners)."""
+    d.record(d.residuals(o, x, P))
+
+
 def feed(d: Disagreement, camera: str, means_mm: tuple[float, float, float], frames: int, start: float = 0.0,
          jitter_mm: float = 0.5) -> float:
     """frames views of one camera: its offsets alternate ±jitter_mm about means_mm; the time after the last."""
     t = start
     for i in range(frames):
         t = start + i / RATE_HZ
-        d.add(view(camera, t, (np.array(means_mm) + (-1) ** i * jitter_mm) * MM), X, P)
+        keep(d, view(camera, t, (np.array(means_mm) + (-1) ** i * jitter_mm) * MM), X, P)
     return t
 
 
@@ -70,12 +75,12 @@ def test_a_camera_new_to_the_cone_holds_it_back_until_compared_and_not_for_long(
     disagreement counts; one that never gets there (its fits ambiguous) holds it DISAGREEMENT_WAIT_S at most."""
     d = cone()
     t = feed(d, "a", (0.0, 0.0, 0.0), 30)
-    d.add(view("b", t + 0.01, np.array([0.0, 3.0, 0.0]) * MM), X, P)
+    keep(d, view("b", t + 0.01, np.array([0.0, 3.0, 0.0]) * MM), X, P)
     assert d.floors(t + 0.01)[1][0]
     t = feed(d, "b", (0.0, 3.0, 0.0), 3, start=t + 0.02)
     floors, pending = d.floors(t)
     assert not pending[0] and np.sqrt(floors[0, 1]) >= 1.0 * MM
-    d.add(view("c", t, np.zeros(3)), None)  # seen before it gave a residual (the topside not placed)
+    keep(d, view("c", t, np.zeros(3)), None)  # seen before it gave a residual (the topside not placed)
     assert d.floors(t)[1][0] and not d.floors(t + DISAGREEMENT_WAIT_S + 0.01)[1][0]
 
 
@@ -91,11 +96,11 @@ def test_a_poor_view_that_disagrees_alone_is_not_taken_for_the_others_error() ->
 
 def test_ambiguous_fits_and_views_of_other_pairs_give_nothing() -> None:
     d = cone()
-    d.add(view("a", 0.0, np.zeros(3), choice=Choice.AMBIGUOUS), X, P)
+    keep(d, view("a", 0.0, np.zeros(3), choice=Choice.AMBIGUOUS), X, P)
     other = view("b", 0.1, np.zeros(3))
     topside = BodyPose("topside", (7,), other.topside.T_camera_body, other.topside.covariance, 0.1, Choice.UNIQUE)
-    d.add(BodyObservation(0.1, "b", other.jacket, topside), X, P)
-    assert not d.moments and not d.seen
+    keep(d, BodyObservation(0.1, "b", other.jacket, topside), X, P)
+    assert not d.moments and not d.by_cone
 
 
 def test_the_relative_poses_jacobian_is_the_derivative_of_the_offset_it_feeds() -> None:
@@ -140,7 +145,7 @@ def test_a_frames_residual_is_its_own_offset_at_the_cone_less_the_filters() -> N
                         BodyPose("topside", (2,), T_cj @ from_params(q), o.topside.covariance, 0.1, Choice.UNIQUE))
     x = X.copy()
     x[:3], x[3:6] = [0.01, 0.0, 0.02], [0.0, 0.005, 0.0]
-    d.add(o, x, P)
+    keep(d, o, x, P)
     own = np.zeros(STATE)
     own[:3], own[3:6] = q[3:], q[:3]
     np.testing.assert_allclose(d.moments[("a", "A")].mean, point_offset_matrix(c) @ (own - x[:STATE]), atol=1e-9)

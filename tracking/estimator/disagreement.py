@@ -62,7 +62,6 @@ class _Moments:
     s1: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r
     s2: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r²
 
-
     def add(self, time: float, r: np.ndarray, weight: float) -> None:
         k = float(np.exp(-max(0.0, time - self.time) / DISAGREEMENT_TAU_S))
         self.count = k * self.count + 1.0
@@ -111,7 +110,6 @@ class Disagreement:
     H: np.ndarray  # (C, 3, 12) the cones' offsets from the topside's state (point_offset_matrix)
     pairs: dict[str, list[tuple[int, int]]]
     moments: dict[tuple[str, str], _Moments] = field(default_factory=dict)  # (camera, cone) ->
-    seen: dict[tuple[str, str], float] = field(default_factory=dict)  # (camera, cone) -> time of its last view
     first_seen: dict[tuple[str, str], float] = field(default_factory=dict)  # (camera, cone) -> of its first
     by_cone: dict[int, dict[str, float]] = field(default_factory=dict)  # cone index -> camera -> its last view
     versions: dict[int, int] = field(default_factory=dict)  # cone index -> residuals kept so far
@@ -150,7 +148,7 @@ class Disagreement:
         """Keep a frame's residuals: the filter used its topside corners (a view it refused makes no estimate)."""
         for k in r.seen:
             key = (r.camera, self.names[k])
-            self.seen[key] = self.by_cone.setdefault(k, {})[r.camera] = r.time
+            self.by_cone.setdefault(k, {})[r.camera] = r.time
             self.first_seen.setdefault(key, r.time)
         for k, residual, weight in r.residuals:
             key = (r.camera, self.names[k])
@@ -158,10 +156,6 @@ class Disagreement:
                 self.moments[key] = _Moments(r.time)
             self.moments[key].add(r.time, residual, weight)
             self.versions[k] = self.versions.get(k, 0) + 1
-
-    def add(self, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None) -> None:
-        """A frame's residuals, kept."""
-        self.record(self.residuals(o, x, P))
 
     def floors(self, time: float) -> tuple[np.ndarray, np.ndarray]:
         """(C, 3) variance, m², each cone's σ² is at least for its cameras' disagreement at a time; and (C,) whether a

@@ -294,16 +294,16 @@ class TopsideFilter(FilterState):
         timed_sds = sds if timeds is covs else np.sqrt(np.diagonal(timeds, axis1=1, axis2=2)).tolist()
         mismatch = self.scale.mismatch  # every offset scaled: once a time, not once a cone
         for k, (cone, offset, cov, sd, timed_sd) in enumerate(zip(names, offsets, covs, sds, timed_sds, strict=True)):
-            withheld = self._withheld(float(offset[2]), sd, timed_sd, limit, mismatch) or \
-                (WITHHELD_COMPARING if pending[k] else "")
+            withheld = self._withheld(float(offset[2]), sd, timed_sd, limit, mismatch, bool(pending[k]))
             offset = np.full(3, np.nan) if withheld else offset
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))
         return out
 
-    def _withheld(self, dz: float, sd: list[float], timed_sd: list[float], limit: float, mismatch: bool) -> str:
+    def _withheld(self, dz: float, sd: list[float], timed_sd: list[float], limit: float, mismatch: bool,
+                  comparing: bool = False) -> str:
         """Why a cone's offset of Δz dz and σ per axis sd (3,) is not shown (empty: it is): a rig error (mismatch: the
-        markers are not the size the rig states), or σ beyond limit (the clocks' fault when its σ with exact clocks,
-        timed_sd, would have been shown)."""
+        markers are not the size the rig states), σ beyond limit (the clocks' fault when its σ with exact clocks,
+        timed_sd, would have been shown), or a camera new to it not yet compared with the others (comparing)."""
         if mismatch:  # every offset scaled
             return WITHHELD_SCALE
         if below_cones(dz, sd[2]):  # no set-down can be there
@@ -311,7 +311,7 @@ class TopsideFilter(FilterState):
             return WITHHELD_BELOW
         if max(sd) > limit:
             return WITHHELD_CLOCKS if max(timed_sd) <= limit else WITHHELD_SIGMA
-        return ""
+        return WITHHELD_COMPARING if comparing else ""
 
 
 @dataclass
