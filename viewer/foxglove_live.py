@@ -85,9 +85,9 @@ class ChannelWriter:
                                        context=self.context)
             self.channels[topic] = channel
         data = message.SerializeToString()
+        if topic.endswith(LATCHED_SUFFIXES):  # latched before it goes out: Latch runs on the server's thread, so a
+            self.latest[topic] = (data, ns)  # client subscribing between log() and the latch would get neither
         channel.log(data, log_time=ns)
-        if topic.endswith(LATCHED_SUFFIXES):
-            self.latest[topic] = (data, ns)
         self.first_ns = ns if self.first_ns is None else min(self.first_ns, ns)
         self.last_ns = ns if self.last_ns is None else max(self.last_ns, ns)
 
