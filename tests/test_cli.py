@@ -78,6 +78,9 @@ def test_track_fused_is_the_default(installation: Path, tmp_path: Path) -> None:
     assert set(df["withheld"][~shown]) == {"σ too large", "cameras not yet compared"}  # until both are compared
     assert shown[-6:].all() and np.abs(err[shown]).max() < 0.01  # each camera's depth is covered by the other's
     assert (df[["sdx", "sdy", "sdz"]].to_numpy()[shown] < 0.05).all()  # lateral axis
+    row = next(line for line in proc.stdout.splitlines() if line.strip("│ ").startswith("A "))  # the cones table
+    assert f"{shown.mean():.0%}" in row and "cam-ahead" in row  # its share shown, as the CSV has it
+    assert "never shown" not in proc.stderr
 
 
 def test_evaluate(installation: Path, tmp_path: Path) -> None:

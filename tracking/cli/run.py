@@ -49,6 +49,7 @@ from tracking.cli.options import (
     finite,
 )
 from tracking.cli.view import view
+from tracking.cone_tally import ConeTallies
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.errors import InputError
 from tracking.outputs import Outputs, check_outputs
@@ -90,6 +91,7 @@ class RunLoop:
     roi: bool = False
     warn: bool = False
     writer: OffsetsWriter | None = None  # the offsets CSV's, once open
+    tally: ConeTallies = field(default_factory=ConeTallies)  # what each cone showed, and why not
 
     @property
     def rows(self) -> int:
@@ -109,7 +111,9 @@ class RunLoop:
                 warn_lines(result.warnings)
             for sink in self.sinks:
                 sink.on_frame(result)
-            yield from result.measurements
+            for m in result.measurements:
+                self.tally.measured(m)
+                yield m
 
     def write(self, csv: Path, estimator: Estimator, report: FilterReport | None = None) -> None:
         """The estimator's offsets into csv and the sinks. The sinks are closed after the CSV however the loop ends
@@ -123,6 +127,7 @@ class RunLoop:
                     for sink in self.sinks:
                         sink.on_estimate(e)
                     self.writer.write(e)
+                    self.tally.add(e)
         finally:
             error = sys.exc_info()[1]
             failing = error is not None
@@ -240,6 +245,7 @@ def track(
     finally:
         loop.run.close()
     _print_track_summary(the_rig, rig, mode, loop.stats, fusion)
+    _print_cones(loop.tally)
     _print_track_outputs(loop.rows, out, rrd, mcap)
     if mode in (Mode.FUSED, Mode.SMOOTHED):
         _rig_findings(rig, report, loop.stats)
@@ -285,6 +291,24 @@ def _print_track_summary(rig: Rig, rig_path: Path, mode: Mode, stats: TrackStats
                       f"their body confirmed (dropped): {summary}", style="yellow")
     for line in stats.warnings([c.name for c in rig.cameras]):  # videos cut short, timestamps back or jumping
         err_console.print(f"topside: warning: {line}", style="yellow")
+
+
+def _print_cones(tally: ConeTallies) -> None:
+    """Per cone: the share of its estimates shown, the first, why the others were withheld, the least σ it reached and
+    the cameras that measured its pair; a cone never shown gets a warning line saying why."""
+    from rich.table import Table
+
+    if not tally.cones:
+        return
+    table = Table(title="cones")
+    for col in ("cone", "shown", "first shown", "withheld", "least σ", "pair measured by (frames)"):
+        table.add_column(col, justify="right" if col in ("shown", "first shown") else "left")
+    for row in tally.rows():
+        table.add_row(*row)
+    console.print(table)
+    for cone in tally.cones.values():
+        if why := cone.why_never():
+            err_console.print(f"topside: warning: {why}", markup=False)
 
 
 def _print_track_outputs(rows: int, out: Path, rrd: Path | None, mcap: Path | None) -> None:
