@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 
 import numpy as np
@@ -94,6 +94,8 @@ class ConeReading:
     withheld: str = ""  # why the estimator withheld the offset (tracking.estimate.WITHHELD_*), when it says
     now: float = np.nan  # the live clock the reading was made at (capture time)
     behind: float = 0.0  # how far the view this reading is for is behind the live clock, s (viewer.feed)
+    axis_sigma: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # (3,) m, the estimate's σ per axis
+    # where it states one (for NO DATA: which axis its cameras do not see well enough)
 
 
 def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_measurement: float | None,
@@ -105,7 +107,9 @@ def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_meas
     if estimate is None or not np.all(np.isfinite(estimate.offset)) or age > stale_s or late:
         offset = np.full(3, np.nan) if estimate is None else estimate.offset
         withheld = estimate.withheld if estimate is not None and age <= stale_s else ""
-        return ConeReading(cone, ConeState.NO_DATA, np.nan, np.nan, offset, age, (), withheld, now, behind)
+        axis_sigma = np.sqrt(np.clip(np.diagonal(estimate.covariance), 0.0, None)) \
+            if estimate is not None and estimate.covariance is not None else np.full(3, np.nan)
+        return ConeReading(cone, ConeState.NO_DATA, np.nan, np.nan, offset, age, (), withheld, now, behind, axis_sigma)
     dx, dy = estimate.offset[:2]
     r = concentricity(estimate.offset)
     cov = estimate.covariance[:2, :2] if estimate.covariance is not None else np.zeros((2, 2))
@@ -145,9 +149,14 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
             "same offset millimetres apart, which no single frame shows (shown within half a second)")
     if short:  # not the limit: the reading does not say whether the warm-up's or the later one (50 mm) held
         return WITHHELD_SIGMA
+    sigma = reading.axis_sigma
+    figures = (" (σ " + " · ".join(f"{a} {s * 1e3:.0f}" for a, s in zip(("Δx", "Δy", "Δz"), sigma, strict=True))
+               + " mm)") if np.isfinite(sigma).all() else ""
+    poor = [a for a, s in zip(("x", "y", "z"), sigma, strict=True) if s > REPORT_MAX_SIGMA_M]
+    along = f" along {' and '.join(poor)} (a camera seeing it from another side would measure that)" if poor else ""
     return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for 1 m markers in "
-            f"the first {REPORT_WARMUP_S:g} s after the topside is placed): the cameras do not see this cone well "
-            "enough")
+            f"the first {REPORT_WARMUP_S:g} s after the topside is placed){figures}: the cameras do not see this cone "
+            f"well enough{along}")
 
 
 def cones_line(readings: Sequence[ConeReading], stale_s: float = STALE_S) -> str:

@@ -92,6 +92,10 @@ def test_cone_states() -> None:
     unknown = cone_reading(estimate([np.nan] * 3), "A", 10.1, 10.05)  # the filter's σ beyond its reporting limit
     assert unknown.state == ConeState.NO_DATA and "σ" in cone_markdown(unknown)
     assert no_data_reason(unknown, short=True) == "σ too large"  # the ring's label: no limit that may not be in force
+    lone = cone_reading(dataclasses.replace(estimate([np.nan] * 3), covariance=np.diag([0.012, 0.071, 0.009]) ** 2),
+                        "A", 10.1, 10.05)  # one camera's line of sight along y
+    assert "(σ Δx 12 · Δy 71 · Δz 9 mm)" in cone_markdown(lone) and "well enough along y (" in cone_markdown(lone)
+    assert viewer_safe(cone_markdown(lone))
     untimed = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_CLOCKS), "A", 10.1, 10.05)
     assert no_data_reason(untimed, short=True) == "clocks not measured" and "topside sync" in cone_markdown(untimed)
     assert viewer_safe(cone_markdown(untimed))
