@@ -61,7 +61,7 @@ class ConeTally:
         if self.shown:
             return ""
         reasons = ", ".join(f"{why} ×{n}" for why, n in self.withheld.most_common()) or "no estimate"
-        poor = [a for a, s in zip(AXES, self.least_sigma, strict=True) if s > REPORT_MAX_SIGMA_M]
+        poor = [a for a, s in zip(AXES, self.least_sigma, strict=True) if REPORT_MAX_SIGMA_M < s < np.inf]
         if not poor:
             return f"cone {self.cone}: never shown ({reasons})"
         cams = sorted(self.pair_frames)

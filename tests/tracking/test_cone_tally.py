@@ -56,3 +56,10 @@ def test_a_cone_without_a_pair_says_its_offset_came_through_the_topside() -> Non
     tally.add(estimate(1.0, "B", (80.0, 20.0, 90.0), WITHHELD_SIGMA))
     why = tally.cones["B"].why_never()
     assert "Δx and Δz" in why and "no camera measured a marker pair there" in why
+
+
+def test_a_mode_without_a_sigma_says_only_that_the_cone_was_never_shown() -> None:
+    tally = ConeTallies()
+    tally.add(ConeEstimate(1.0, "D", NAN3, ("stern1",)))  # raw mode: no covariance, no reason
+    assert tally.cones["D"].why_never() == "cone D: never shown (no number ×1)"
+    assert tally.rows()[0][4] == "—"
