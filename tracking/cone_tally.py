@@ -64,15 +64,15 @@ class ConeTally:
         poor = [a for a, s in zip(AXES, self.least_sigma, strict=True) if REPORT_MAX_SIGMA_M < s < np.inf]
         if not poor:
             return f"cone {self.cone}: never shown ({reasons})"
-        cams = sorted(self.pair_frames)
+        cams, along = sorted(self.pair_frames), " and ".join(poor)
         head = (f"cone {self.cone}: never shown ({reasons}): its σ came no lower than {self.sigma_text()}, above the "
-                f"{REPORT_MAX_SIGMA_M * 1000:.0f} mm limit on {' and '.join(poor)}")
+                f"{REPORT_MAX_SIGMA_M * 1000:.0f} mm limit on {along}")
         if not cams:
             return f"{head}: no camera measured a marker pair there (its offset came through the topside alone)"
         if len(cams) == 1:
-            return (f"{head}: {cams[0]} alone measured its pair and does not see it well enough along that axis; a "
-                    "camera seeing it from another side would measure it across its picture")
-        return f"{head}: its cameras ({', '.join(cams)}) do not see it well enough along that axis"
+            return (f"{head}: {cams[0]} alone measured its pair and does not see it well enough along {along}; a "
+                    "camera seeing it from another side would measure that across its picture")
+        return f"{head}: its cameras ({', '.join(cams)}) do not see it well enough along {along}"
 
 
 @dataclass
