@@ -210,9 +210,10 @@ def _mm(v: np.ndarray) -> str:
 
 def accuracy_why(m: ConeResult) -> str:
     """Whether an accuracy miss is what the cone's stated σ allows (the views support no better: an unbiased error of
-    σ has a mean |e| of 0.8 σ and reaches 3 σ, and the σ holds the errors) or an error beyond its σ."""
+    σ has a mean |e| of 0.8 σ and reaches σ √(2 ln N) over N samples, and the σ holds the errors) or an error beyond
+    its σ."""
     mae_allowed = MAE_EXPECTED * m.sigma > MAE_TARGET_M
-    max_allowed = 3.0 * m.sigma > MAX_TARGET_M
+    max_allowed = np.sqrt(2.0 * np.log(max(m.samples, 2))) * m.sigma > MAX_TARGET_M  # a Gaussian's largest of N
     missed_mae, missed_max = m.mae > MAE_TARGET_M, m.emax > MAX_TARGET_M
     limited = np.all(~missed_mae | mae_allowed) and np.all(~missed_max | max_allowed) and honest(m)
     return f"σ-limited: σ {_mm(m.sigma)} mm" if limited else f"beyond what σ {_mm(m.sigma)} mm allows"
