@@ -204,6 +204,7 @@ def test_live_stopped_by_sigterm_keeps_every_row_under_its_name(installation: Pa
     rows = len(pd.read_csv(out))
     assert 0 < rows < 2 * FRAMES  # some, not all
     assert f"wrote {rows} rows to {out}" in stdout
+    assert any(line.strip("│ ").startswith("A ") for line in stdout.splitlines())  # the cones table, as track's
     assert not list(tmp_path.glob("*.partial*"))  # everything renamed to its final name
     index = pd.read_csv(tmp_path / "live.segments.csv")
     assert all((tmp_path / f).is_file() for f in index["file"])

@@ -26,6 +26,8 @@ from tracking.cli.options import (
     WebPortOption,
     finite,
 )
+from tracking.cli.track_summary import print_cones, warn_cones
+from tracking.cone_tally import ConeTallies
 from tracking.errors import InputError
 from tracking.outputs import Outputs, check_outputs
 
@@ -129,7 +131,8 @@ def live(
                                      view_image_rate, view_image_width)
         if replay_over and viewer_process is not None:  # the files ended: what they showed stays on view
             session.finish()
-            console.print(written := session.written(), markup=False)
+            written = session.written()
+            session.print_summary()
             what = f"the web viewer keeps serving at {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}" \
                 if web else "the viewer keeps showing it"
             err_console.print(f"the replay has ended; {what} until Ctrl-C", markup=False)
@@ -140,7 +143,7 @@ def live(
     finally:
         session.close()
     if not written:
-        console.print(session.written(), markup=False)
+        session.print_summary()
 
 
 def _server_bytes(rig: Rig, scope: ViewerScope, image_rate: float, image_width: int) -> int:
@@ -215,6 +218,7 @@ class LiveSession:
     writer: OffsetsWriter | None = None
     finished: bool = False  # the recording closed and the files under their final names
     duration_over: bool = False  # the session ended after its --duration (not because its sources did)
+    tally: ConeTallies = field(default_factory=ConeTallies)  # what each cone showed, and why not
 
     @property
     def rows(self) -> int:
@@ -249,6 +253,7 @@ class LiveSession:
                 estimates = self._estimates(tracker, duration, cones)
                 for e in estimates:
                     self.writer.write(e)
+                    self.tally.add(e)
                 return not self.duration_over
 
     def _estimates(self, tracker: LiveTracker, duration: float | None, cones: ConesLine) -> Iterator[ConeEstimate]:
@@ -263,6 +268,8 @@ class LiveSession:
             yield from update.estimates
             for result in update.results:
                 warn_lines(result.warnings)
+                for m in result.measurements:
+                    self.tally.measured(m)
             cones.show(self.recorder.readings)
             if update.results:
                 start = update.results[0].time if start is None else start
@@ -273,6 +280,12 @@ class LiveSession:
     def written(self) -> str:
         """The line saying what the session wrote."""
         return f"wrote {self.rows} rows to {self.out}; recording {self.rrd.with_name(self.rrd.stem + '-*.rrd')}"
+
+    def print_summary(self) -> None:
+        """What the session wrote, each cone's share shown and why not (track's cones table and warnings)."""
+        console.print(self.written(), markup=False)
+        print_cones(self.tally)
+        warn_cones(self.tally)
 
     def finish(self) -> None:
         """Close the recording and keep what was measured under its final names (the viewer stays)."""
