@@ -15,14 +15,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tracking.estimate import ConeEstimate
+from tracking.estimate import ConeEstimate, axes_above, sigma_text
 from tracking.offsets import PairOffset
 
 if TYPE_CHECKING:  # the estimator's package is the CLI's heaviest import: `track` loads it when it fuses
     from tracking.estimator.measurements import Measurement
-
-AXES = ("Δx", "Δy", "Δz")
-
 
 @dataclass
 class ConeTally:
@@ -39,8 +36,7 @@ class ConeTally:
     def add(self, e: ConeEstimate) -> None:
         """Count one estimate of this cone."""
         self.estimates += 1
-        if e.covariance is not None:
-            self.least_sigma = np.fmin(self.least_sigma, np.sqrt(np.clip(np.diagonal(e.covariance), 0.0, None)))
+        self.least_sigma = np.fmin(self.least_sigma, e.sigma)  # NaN (no covariance) leaves it
         if np.isfinite(e.offset).all():
             self.shown += 1
             if not np.isfinite(self.first_shown):
@@ -50,9 +46,11 @@ class ConeTally:
 
     def sigma_text(self) -> str:
         """The least σ per axis in mm, e.g. 'Δx 12 · Δy 71 · Δz 9 mm' ('—' where no estimate stated one)."""
-        if not np.isfinite(self.least_sigma).any():
-            return "—"
-        return " · ".join(f"{a} {s * 1000:.0f}" for a, s in zip(AXES, self.least_sigma, strict=True)) + " mm"
+        return sigma_text(self.least_sigma) if np.isfinite(self.least_sigma).any() else "—"
+
+    def reasons(self) -> str:
+        """Why its estimates were withheld, most often first: 'σ too large ×30, cameras not yet compared ×1'."""
+        return ", ".join(f"{why} ×{n}" for why, n in self.withheld.most_common())
 
     def why_never(self) -> str:
         """Why a cone never shown was not, in one line (empty once it was shown)."""
@@ -60,11 +58,11 @@ class ConeTally:
 
         if self.shown:
             return ""
-        reasons = ", ".join(f"{why} ×{n}" for why, n in self.withheld.most_common()) or "no estimate"
-        poor = [a for a, s in zip(AXES, self.least_sigma, strict=True) if REPORT_MAX_SIGMA_M < s < np.inf]
-        if not poor:
+        reasons = self.reasons() or "no estimate"
+        along = axes_above(self.least_sigma, REPORT_MAX_SIGMA_M)
+        if not along:
             return f"cone {self.cone}: never shown ({reasons})"
-        cams, along = sorted(self.pair_frames), " and ".join(poor)
+        cams = sorted(self.pair_frames)
         head = (f"cone {self.cone}: never shown ({reasons}): its σ came no lower than {self.sigma_text()}, above the "
                 f"{REPORT_MAX_SIGMA_M * 1000:.0f} mm limit on {along}")
         if not cams:
@@ -100,7 +98,6 @@ class ConeTallies:
         for name in sorted(self.cones):
             t = self.cones[name]
             first = f"{t.first_shown - self.start:.1f} s" if np.isfinite(t.first_shown) else "never"
-            reasons = ", ".join(f"{why} ×{n}" for why, n in t.withheld.most_common()) or "—"
-            out.append((name, f"{t.shown / max(t.estimates, 1):.0%}", first, reasons, t.sigma_text(),
+            out.append((name, f"{t.shown / max(t.estimates, 1):.0%}", first, t.reasons() or "—", t.sigma_text(),
                         ", ".join(f"{c} ({n})" for c, n in sorted(t.pair_frames.items())) or "—"))
         return out

@@ -29,3 +29,23 @@ class ConeEstimate:
     T_jacket_cameras: Mapping[str, np.ndarray] | None = None  # (4, 4) per placed camera, where the estimator keeps
     # the cameras' poses (the live fused filter); one mapping shared by the estimates of one time
     withheld: str = ""  # why the offset is NaN, in a few words (WITHHELD_*), where the estimator withheld it
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """(3,) m, 1σ per axis (NaN where the estimator states no covariance)."""
+        if self.covariance is None:
+            return np.full(3, np.nan)
+        return np.sqrt(np.maximum(np.diagonal(self.covariance), 0.0))  # (maximum: a third of clip's cost, per CSV row)
+
+
+AXIS_NAMES = ("Δx", "Δy", "Δz")
+
+
+def sigma_text(sigma: np.ndarray) -> str:
+    """σ per axis (3,) m as 'Δx 12 · Δy 71 · Δz 9 mm'."""
+    return " · ".join(f"{a} {s * 1000:.0f}" for a, s in zip(AXIS_NAMES, sigma, strict=True)) + " mm"
+
+
+def axes_above(sigma: np.ndarray, limit: float) -> str:
+    """The axes whose σ (3,) m exceeds limit (not those that state none), e.g. 'Δy' or 'Δx and Δz'; empty if none."""
+    return " and ".join(a for a, s in zip(AXIS_NAMES, sigma, strict=True) if limit < s < np.inf)

@@ -6,13 +6,10 @@ import csv
 from collections.abc import Iterable
 from pathlib import Path
 
-import numpy as np
-
 from tracking.estimate import ConeEstimate
 
 OFFSET_COLUMNS = ("time", "cone", "dx", "dy", "dz", "cameras", "sdx", "sdy", "sdz", "withheld")  # sd*: 1σ, m;
 # withheld: why dx, dy, dz are empty, where the estimator says (tracking.estimate.WITHHELD_*)
-NO_SIGMA = [float("nan")] * 3  # sd* of an estimate without a covariance
 FLUSH_ROWS = 100  # rows between flushes: a killed run keeps all but the last few
 
 
@@ -32,7 +29,7 @@ class OffsetsWriter:
         """One estimate as a row (numbers as Python floats: formatting numpy's costs twice as much, and a split
         run's driver writes every row: benchmarks/results/scale.md)."""
         dx, dy, dz = e.offset.tolist()
-        sd = np.sqrt(np.diagonal(e.covariance)).tolist() if e.covariance is not None else NO_SIGMA
+        sd = e.sigma.tolist()
         self._writer.writerow((f"{e.time:.6f}", e.cone, f"{dx:.5f}", f"{dy:.5f}", f"{dz:.5f}", " ".join(e.cameras),
                                f"{sd[0]:.5f}", f"{sd[1]:.5f}", f"{sd[2]:.5f}", e.withheld))
         self.rows += 1

@@ -307,8 +307,7 @@ def log_estimates(rec: rr.RecordingStream, estimates: list[ConeEstimate],
         rows = [i for i, e in enumerate(estimates) if e.cone == cone]
         times = np.array([estimates[i].time for i in rows])
         offsets = np.array([estimates[i].offset for i in rows])
-        sds = np.array([np.sqrt(np.diag(estimates[i].covariance)) if estimates[i].covariance is not None
-                        else np.full(3, np.nan) for i in rows])
+        sds = np.array([estimates[i].sigma for i in rows])
         for k, axis in enumerate(AXES):
             send_scalars(rec, f"offsets/{axis}/{cone}/estimate", times, offsets[:, k])
             send_scalars(rec, f"uncertainty/{axis}/{cone}", times, sds[:, k])

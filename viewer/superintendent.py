@@ -35,6 +35,8 @@ from tracking.estimate import (
     WITHHELD_SCALE,
     WITHHELD_SIGMA,
     ConeEstimate,
+    axes_above,
+    sigma_text,
 )
 from tracking.estimator.noise import REPORT_MAX_SIGMA_M, REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_SIDES
 from tracking.live import STALE_S, CameraHealth
@@ -107,8 +109,7 @@ def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_meas
     if estimate is None or not np.all(np.isfinite(estimate.offset)) or age > stale_s or late:
         offset = np.full(3, np.nan) if estimate is None else estimate.offset
         withheld = estimate.withheld if estimate is not None and age <= stale_s else ""
-        axis_sigma = np.sqrt(np.clip(np.diagonal(estimate.covariance), 0.0, None)) \
-            if estimate is not None and estimate.covariance is not None else np.full(3, np.nan)
+        axis_sigma = estimate.sigma if estimate is not None else np.full(3, np.nan)
         return ConeReading(cone, ConeState.NO_DATA, np.nan, np.nan, offset, age, (), withheld, now, behind, axis_sigma)
     dx, dy = estimate.offset[:2]
     r = concentricity(estimate.offset)
@@ -150,10 +151,9 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
     if short:  # not the limit: the reading does not say whether the warm-up's or the later one (50 mm) held
         return WITHHELD_SIGMA
     sigma = reading.axis_sigma
-    figures = (" (σ " + " · ".join(f"{a} {s * 1e3:.0f}" for a, s in zip(("Δx", "Δy", "Δz"), sigma, strict=True))
-               + " mm)") if np.isfinite(sigma).all() else ""
-    poor = [a for a, s in zip(("x", "y", "z"), sigma, strict=True) if s > REPORT_MAX_SIGMA_M]
-    along = f" along {' and '.join(poor)} (a camera seeing it from another side would measure that)" if poor else ""
+    figures = f" (σ {sigma_text(sigma)})" if np.isfinite(sigma).all() else ""
+    poor = axes_above(sigma, REPORT_MAX_SIGMA_M)
+    along = f" along {poor} (a camera seeing it from another side would measure that)" if poor else ""
     return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for 1 m markers in "
             f"the first {REPORT_WARMUP_S:g} s after the topside is placed){figures}: the cameras do not see this cone "
             f"well enough{along}")

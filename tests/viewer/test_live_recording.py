@@ -94,7 +94,7 @@ def test_cone_states() -> None:
     assert no_data_reason(unknown, short=True) == "σ too large"  # the ring's label: no limit that may not be in force
     lone = cone_reading(dataclasses.replace(estimate([np.nan] * 3), covariance=np.diag([0.012, 0.071, 0.009]) ** 2),
                         "A", 10.1, 10.05)  # one camera's line of sight along y
-    assert "(σ Δx 12 · Δy 71 · Δz 9 mm)" in cone_markdown(lone) and "well enough along y (" in cone_markdown(lone)
+    assert "(σ Δx 12 · Δy 71 · Δz 9 mm)" in cone_markdown(lone) and "well enough along Δy (" in cone_markdown(lone)
     assert viewer_safe(cone_markdown(lone))
     untimed = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_CLOCKS), "A", 10.1, 10.05)
     assert no_data_reason(untimed, short=True) == "clocks not measured" and "topside sync" in cone_markdown(untimed)

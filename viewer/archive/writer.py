@@ -209,7 +209,7 @@ class Archive:
         filter's camera frames; a log line when the cone's state changes."""
         ns = self._advance(capture_ns(estimate.time) if ns is None else ns)
         cov = estimate.covariance
-        sd = np.sqrt(np.diag(cov)) if cov is not None else np.full(3, np.nan)
+        sd = estimate.sigma
         state = cone_state(estimate.offset)
         self.file.write(f"/offsets/{estimate.cone}", ConeOffset(
             timestamp=stamp(ns), cone=estimate.cone, dx=estimate.offset[0], dy=estimate.offset[1],
