@@ -14,7 +14,8 @@ line, printed with the first frame of the replay, capture time ~0). All on this 
 tracker (and with whatever else runs: the load average is reported).
 
 Run: .venv/bin/python -m benchmarks.web_first_figure [--repeats 3] [--screenshots docs]
-Results: benchmarks/results/web_first_figure.md
+     .venv/bin/python -m benchmarks.web_first_figure --late 60,180 [--scopes superintendent] [--busy-core]
+Results: benchmarks/results/web_first_figure.md; web_late_open.md (web_late_open_busy.md with --busy-core)
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import argparse
 import math
 import os
 import socket
+import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -156,12 +158,11 @@ def follow_lag(page, live_start: float, until: float) -> list[tuple[float, float
 
 def late_runs(scene: Path, opens: list[float], scopes: list[str], follow_s: float = FOLLOW_S) -> list[LateOpen]:
     """The page opened at each of `opens` s into a live session of the scene looped, per scope; its lag followed."""
+    from tracking.cli.live import server_bytes
+    from tracking.cli.options import VIEW_IMAGE_RATE_DEFAULT, VIEW_IMAGE_WIDTH_DEFAULT, ViewerScope
     from tracking.rig import load_rig
-    from tracking.sources import byte_rate
-    from viewer.playback import late_join_bytes
 
     rig = load_rig(scene / "rig.yaml")
-    rates = [byte_rate(rig, c) for c in rig.cameras]
     cones = cones_of(scene / "rig.yaml")
     out = []
     for scope in scopes:
@@ -185,7 +186,8 @@ def late_runs(scene: Path, opens: list[float], scopes: list[str], follow_s: floa
                 cut = next((line.strip() for _, line in served.lines if "cut loose" in line), "")
                 minutes = int((time.monotonic() - start) // 60)
             written = len(list(work.glob("live-[0-9][0-9][0-9].rrd")))  # every segment closed and renamed
-            run = LateOpen(case, figure, history, lags, late_join_bytes(rates, scope) / 1e6, cut, (written, minutes))
+            kept = server_bytes(rig, ViewerScope(scope), VIEW_IMAGE_RATE_DEFAULT, VIEW_IMAGE_WIDTH_DEFAULT)
+            run = LateOpen(case, figure, history, lags, kept / 1e6, cut, (written, minutes))
             print(run, flush=True)
             out.append(run)
             remove_tree(work)
@@ -289,6 +291,8 @@ def main() -> None:
     parser.add_argument("--scopes", default="superintendent,all")
     parser.add_argument("--long", type=float, default=None, help="with --late: one more open this many seconds in, "
                         "the first scope only (e.g. 1800: a page opened after half an hour)")
+    parser.add_argument("--busy-core", action="store_true", help="with --late: one core kept busy by a spinning "
+                        "process (as a second test worker, or a tablet slower than this machine)")
     args = parser.parse_args()
     scene = render_scene(SCENARIO, (920, 600), CLIP_S)
     if args.long is not None and not args.late:
@@ -296,14 +300,21 @@ def main() -> None:
     if args.late:
         load = os.getloadavg()
         scopes = args.scopes.split(",")
-        runs = late_runs(scene, [float(v) for v in args.late.split(",")], scopes)
-        if args.long is not None:
-            runs += late_runs(scene, [args.long], scopes[:1], LONG_FOLLOW_S)
+        spinner = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if args.busy_core else None
+        try:
+            runs = late_runs(scene, [float(v) for v in args.late.split(",")], scopes)
+            if args.long is not None:
+                runs += late_runs(scene, [args.long], scopes[:1], LONG_FOLLOW_S)
+        finally:
+            if spinner is not None:
+                spinner.kill()
+        busy = ", one of them kept busy by a spinning process" if args.busy_core else ""
         lines = ["# A page opened late into a live session", "",
                  f"{SCENARIO}, 4 cameras at 15 FPS, 920×600, looped; headless Chromium at {TABLET['width']}×"
-                 f"{TABLET['height']}, software WebGL, on the same {os.cpu_count()} cores as the tracker; load average "
-                 f"{load[0]:.1f} before, {os.getloadavg()[0]:.1f} after.", "", *late_lines(runs, args.long is not None)]
-        write_results("web_late_open", lines, echo=True)
+                 f"{TABLET['height']}, software WebGL, on the same {os.cpu_count()} cores as the tracker{busy}; load "
+                 f"average {load[0]:.1f} before, {os.getloadavg()[0]:.1f} after.", "",
+                 *late_lines(runs, args.long is not None)]
+        write_results("web_late_open_busy" if args.busy_core else "web_late_open", lines, echo=True)
         return
     load = os.getloadavg()
     live = live_runs(scene, args.repeats, args.screenshots)

@@ -27,17 +27,21 @@ SPLIT_UNITS = {"ns": 1e-9, "us": 1e-6, "µs": 1e-6, "ms": 1e-3, "s": 1.0}
 GRPC_PORT = 9876
 WEB_PORT = 9090
 VIEWER_MEMORY_LIMIT = "2GB"  # a six-hour session: the viewer drops the oldest data beyond this, the file keeps all
-LATE_JOIN_S = 20.0  # s: a web page opened late is sent about this much of the past, so opening it after six hours
-# costs what opening it after one does. Its server keeps no more: Rerun drops the oldest temporal data beyond its
-# limit first, static data only after all of that, the layout never. With 60 s a page opened 60 s in fell 20 s behind
-# for 40 s while the backlog loaded; with 20 s it was within 0.6 s from 25 s on (results/web_late_open.md)
+LATE_JOIN_S = 6.0  # s: a web page opened late is sent about this much of the past, so opening it after six hours
+# costs what opening it after one does. The page takes what it is sent in arrival order, at most 10 ms of each of its
+# frames (re_viewer's receive_messages), so the present waits behind all of it: on the tests' one-cone installation
+# with the other core busy, a page sent 33 s of the past came within 5 s of the live clock 44 s after opening, one sent
+# this (and fewer chunks: viewer.superintendent) 19 s after (results/web_late_open_pictures.md). The trend's past fills
+# in as the page stays open. Rerun drops the oldest temporal data first, static data only after, the layout never.
 VIEW_OVERHEAD_BYTES_PER_S = {"superintendent": 10_000, "all": 100_000}  # per camera, what a live viewer's stream
-# carries beyond the camera's video: the figures (superintendent), or the detections, poses and health as recorded
-# (all). Measured on config2-procedure5, 4 cameras at 15 FPS, 920×600, the live path flat out into a file: the
-# superintendent stream 0.27 MB/s (the figures, and the video of the cameras its layout shows, not all four), "all"
-# 0.73 MB/s, the four videos 0.34 MB/s
-MIN_SERVER_MEMORY_BYTES = 4 << 20  # the web server keeps at least this: two 2-second keyframe intervals of four
-# cameras at 2 Mbit/s (the layout and the static figures weigh kilobytes)
+# carries beyond the camera's images: its detections drawn (superintendent), or the detections, poses and health as
+# recorded (all). Measured on config2-procedure5, 4 cameras at 15 FPS, 920×600, the live path flat out into a file
+VIEW_FIGURE_BYTES_PER_S = 60_000  # per cone, its figures (text, bull's-eye, trend): 6 parts, a chunk each per
+# batch (viewer.session.BATCH_TICK_S), 2-5 kB, mostly their schemas; measured on the tests' one-cone installation
+MIN_SERVER_MEMORY_BYTES = 4 << 20  # a web server sent videos keeps at least this: two 2-second keyframe intervals
+# of four cameras at 2 Mbit/s, so the oldest kept frame has its keyframe
+MIN_PICTURES_SERVER_BYTES = 512 << 10  # one sent pictures (each a JPEG of its own) and figures: the layout and the
+# static figures weigh kilobytes
 STDIN = "-"  # rerun's data source for its standard input: what a live session feeds (viewer/feed.py)
 # Rerun's analytics pipeline (re_analytics, native/pipeline.rs) starts nothing when CI is set ("Analytics disabled on
 # CI"); FORCE_RERUN_ANALYTICS would override that, so it is dropped. The user's own analytics.json is left alone.
@@ -227,12 +231,13 @@ def viewer_command(recording: Path, web: bool = False, address: str = "127.0.0.1
     return [rerun_binary(), str(recording), "--bind", address, "--port", port]
 
 
-def late_join_bytes(image_bytes_per_s: list[float], scope: str) -> int:
+def late_join_bytes(image_bytes_per_s: list[float], scope: str, cones: int = 1, videos: bool = True) -> int:
     """What a live web server keeps for a page opened late, bytes: LATE_JOIN_S of the viewer's stream, from each
-    camera's images (bytes/s: its video, tracking.sources.byte_rate, or its pictures, viewer.session.view_bytes_per_s)
-    and the scope's overhead per camera."""
-    rate = sum(image_bytes_per_s) + VIEW_OVERHEAD_BYTES_PER_S[scope] * len(image_bytes_per_s)
-    return max(MIN_SERVER_MEMORY_BYTES, int(LATE_JOIN_S * rate))
+    camera's images (bytes/s: its video, tracking.sources.byte_rate, or its pictures, viewer.session.view_bytes_per_s),
+    the scope's overhead per camera and the figures of `cones` cones; at least two keyframe intervals when `videos`."""
+    rate = (sum(image_bytes_per_s) + VIEW_OVERHEAD_BYTES_PER_S[scope] * len(image_bytes_per_s)
+            + VIEW_FIGURE_BYTES_PER_S * cones)
+    return max(MIN_SERVER_MEMORY_BYTES if videos else MIN_PICTURES_SERVER_BYTES, int(LATE_JOIN_S * rate))
 
 
 def live_viewer_command(web: bool, address: str = "127.0.0.1", grpc_port: int = GRPC_PORT, web_port: int = WEB_PORT,

@@ -10,11 +10,14 @@ Entity layout:
         .../offset                           the cone's point (its radius is 2σ); beyond the ring, drawn on the ring
         .../beyond                           ... with an arrow pointing the way and the distance
         .../why                              NO DATA: the reason, in the middle
-    superintendent/trend/<cone>/{concentricity,bound,tolerance}   the last minute's concentricity, r + 2σ, 150 (mm)
+    superintendent/trend/<cone>              the last minute's concentricity, r + 2σ and 150 mm: three series, one
+                                             entity (a chunk per batch, not three: what a late page takes first)
     superintendent/no_camera/<cone>          markdown in the image's place until a camera has measured the cone (a
                                              cone without markers: that none will, and where its offset comes from)
     superintendent/cameras                   markdown: every camera's state, frame rate, age and markers
 The live image per cone is the 2-D view of the camera that measures that cone most.
+Each part is logged with the same components every time (empty ones where it is gone), so that a batch of its rows is
+one chunk: a web page opened late takes its backlog chunk by chunk before the present (viewer.playback.LATE_JOIN_S).
 """
 
 from __future__ import annotations
@@ -56,8 +59,8 @@ TREND_S = 60.0
 VIEW_BEHIND_S = 3.0  # a view whose input is this far behind the live clock shows its cones grey: its figures are old
 WALL_CLOCK_AFTER = 1e9  # capture times beyond this are Unix times (live cameras), shown as the time of day
 WHY_Y_MM = 0.5 * TOLERANCE_MM  # NO DATA's reason: inside the ring, below its centre (clear of the compass words)
+ARROW_RADIUS = -2.5  # the arrow beyond the ring: 2.5 UI points (rr.components.Radius.ui_points: negative)
 NOWHERE = np.zeros((0, 2))  # an empty batch: the part is gone from the view from this time on
-NO_LABELS: list[str] = []  # logged, not left out: the viewer would otherwise keep an earlier row's label
 TARGET_COLORS = {"green": (40, 200, 80), "amber": (255, 170, 0), "red": (230, 40, 40), "none": (140, 140, 140)}
 RING_COLOR = (200, 200, 200)
 TOLERANCE_LINE_COLOR = (230, 40, 40)
@@ -239,11 +242,10 @@ def log_target_circle(rec: rr.RecordingStream, cone: str, marked: bool = True) -
     reach = TARGET_REACH * r
     rr.log(f"{base}/compass", rr.Points2D([[0.85 * reach, 0], [0, -0.9 * reach]], radii=0.5, colors=RING_COLOR,
                                           labels=["port", "astern"]), static=True, recording=rec)
-    trend = f"{ROOT}/trend/{cone}"
-    for name, color, width, label in (("concentricity", TREND_COLOR, 2.5, "concentricity [mm]"),
-                                      ("bound", BOUND_COLOR, 1.0, "+2σ [mm]"),
-                                      ("tolerance", TOLERANCE_LINE_COLOR, 1.5, f"{TOLERANCE_MM:.0f} mm")):
-        rr.log(f"{trend}/{name}", rr.SeriesLines(colors=color, widths=width, names=label), static=True, recording=rec)
+    rr.log(f"{ROOT}/trend/{cone}", rr.SeriesLines(colors=[TREND_COLOR, BOUND_COLOR, TOLERANCE_LINE_COLOR],
+                                                  widths=[2.5, 1.0, 1.5],
+                                                  names=["concentricity [mm]", "+2σ [mm]", f"{TOLERANCE_MM:.0f} mm"]),
+           static=True, recording=rec)
     rr.log(f"{ROOT}/no_camera/{cone}", rr.TextDocument(no_camera_text(cone, marked), media_type=rr.MediaType.MARKDOWN),
            static=True, recording=rec)
 
@@ -259,34 +261,52 @@ def log_cone_reading(rec: rr.RecordingStream, reading: ConeReading, now: float, 
     color = TARGET_COLORS[reading.state.value]
     rr.log(f"{base}/state", rr.LineStrips2D([circle(TOLERANCE_MM)], colors=color,
                                             radii=rr.components.Radius.ui_points(STATE_RING_PX)), recording=rec)
-    trend = f"{ROOT}/trend/{cone}"
-    rr.log(f"{trend}/tolerance", rr.Scalars(TOLERANCE_MM), recording=rec)
     if reading.state == ConeState.NO_DATA:
-        rr.log(f"{base}/offset", rr.Points2D(NOWHERE), recording=rec)
-        rr.log(f"{base}/beyond", rr.Arrows2D(vectors=NOWHERE), recording=rec)
-        rr.log(f"{base}/why", rr.Points2D([[0.0, WHY_Y_MM]], radii=0.5, colors=color,
-                                          labels=[f"NO DATA: {no_data_reason(reading, stale_s, short=True)}"]),
-               recording=rec)
-        for part in ("concentricity", "bound"):  # a gap in the trend, not a line across the time without data
-            rr.log(f"{trend}/{part}", rr.Scalars(np.nan), recording=rec)
+        log_points(rec, f"{base}/offset")
+        log_arrow(rec, f"{base}/beyond")
+        log_points(rec, f"{base}/why", [0.0, WHY_Y_MM], 0.5, color,
+                   f"NO DATA: {no_data_reason(reading, stale_s, short=True)}")
+        log_trend(rec, cone, np.nan, np.nan)  # a gap in the trend, not a line across the time without data
         return
-    rr.log(f"{base}/why", rr.Points2D(NOWHERE), recording=rec)
+    log_points(rec, f"{base}/why")
     mm = reading.concentricity * 1000
     xy = screen_xy(reading.offset[:2])
     dot = max(MIN_DOT_MM, CONFIDENCE_SIGMAS * reading.sigma * 1000)
     label = f"{mm:.0f} mm"
     if mm > TOLERANCE_MM:  # beyond the ring: on the ring, with an arrow the way it is off
         u = xy / np.hypot(*xy)
-        rr.log(f"{base}/offset", rr.Points2D([u * TOLERANCE_MM], radii=dot, colors=color, labels=NO_LABELS),
-               recording=rec)
-        rr.log(f"{base}/beyond", rr.Arrows2D(origins=[u * TOLERANCE_MM], vectors=[u * ARROW_MM], colors=color,
-                                             radii=rr.components.Radius.ui_points(2.5), labels=[label]),
-               recording=rec)
+        log_points(rec, f"{base}/offset", u * TOLERANCE_MM, dot, color, None)  # the arrow has it
+        log_arrow(rec, f"{base}/beyond", u * TOLERANCE_MM, u * ARROW_MM, color, label)
     else:
-        rr.log(f"{base}/offset", rr.Points2D([xy], radii=dot, colors=color, labels=[label]), recording=rec)
-        rr.log(f"{base}/beyond", rr.Arrows2D(vectors=NOWHERE), recording=rec)
-    rr.log(f"{trend}/concentricity", rr.Scalars(mm), recording=rec)
-    rr.log(f"{trend}/bound", rr.Scalars(mm + CONFIDENCE_SIGMAS * reading.sigma * 1000), recording=rec)
+        log_points(rec, f"{base}/offset", xy, dot, color, label)
+        log_arrow(rec, f"{base}/beyond")
+    log_trend(rec, cone, mm, mm + CONFIDENCE_SIGMAS * reading.sigma * 1000)
+
+
+def log_points(rec: rr.RecordingStream, path: str, xy: Sequence[float] | np.ndarray | None = None, radius: float = 0.0,
+               color: Sequence[int] = (0, 0, 0), label: str | None = None) -> None:
+    """One point of a bull's-eye (mm), or none (xy None): always the same four components (an empty label list, not
+    a left-out one: the viewer would otherwise keep an earlier row's label)."""
+    if xy is None:
+        rr.log(path, rr.Points2D(NOWHERE, radii=[], colors=[], labels=[]), recording=rec)
+        return
+    rr.log(path, rr.Points2D(np.reshape(xy, (1, 2)), radii=[radius], colors=[color],
+                             labels=[] if label is None else [label]), recording=rec)
+
+
+def log_arrow(rec: rr.RecordingStream, path: str, origin: np.ndarray | None = None, vector: np.ndarray = NOWHERE,
+              color: Sequence[int] = (0, 0, 0), label: str = "") -> None:
+    """The arrow beyond a bull's-eye's ring (mm), or none (origin None): always the same five components."""
+    if origin is None:
+        rr.log(path, rr.Arrows2D(origins=NOWHERE, vectors=NOWHERE, colors=[], radii=[], labels=[]), recording=rec)
+        return
+    rr.log(path, rr.Arrows2D(origins=[origin], vectors=[vector], colors=[color], radii=[ARROW_RADIUS],
+                             labels=[label]), recording=rec)
+
+
+def log_trend(rec: rr.RecordingStream, cone: str, concentricity_mm: float, bound_mm: float) -> None:
+    """The trend's three series at once (log_target_circle's styles): concentricity, r + 2σ, the tolerance."""
+    rr.log(f"{ROOT}/trend/{cone}", rr.Scalars([concentricity_mm, bound_mm, TOLERANCE_MM]), recording=rec)
 
 
 def log_camera_health(rec: rr.RecordingStream, cameras: Mapping[str, CameraHealth], now: float) -> None:

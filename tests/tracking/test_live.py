@@ -109,7 +109,14 @@ def test_what_a_late_web_page_is_sent_follows_the_cameras_byte_rates(installatio
     import av
 
     from tracking.sources import ENCODE_BITRATE, STREAM_ASSUMED_BITRATE, byte_rate
-    from viewer.playback import LATE_JOIN_S, MIN_SERVER_MEMORY_BYTES, late_join_bytes, live_viewer_command
+    from viewer.playback import (
+        LATE_JOIN_S,
+        MIN_PICTURES_SERVER_BYTES,
+        MIN_SERVER_MEMORY_BYTES,
+        VIEW_FIGURE_BYTES_PER_S,
+        late_join_bytes,
+        live_viewer_command,
+    )
 
     rig = load_rig(installation / "rig.yaml")
     entry = rig.cameras[0]
@@ -121,7 +128,11 @@ def test_what_a_late_web_page_is_sent_follows_the_cameras_byte_rates(installatio
     assert byte_rate(rig, entry.model_copy(update={"source": "rtsp://10.0.0.5/s"})) == STREAM_ASSUMED_BITRATE / 8
     four = [STREAM_ASSUMED_BITRATE / 8] * 4  # four network cameras: about LATE_JOIN_S of their video and figures
     assert LATE_JOIN_S * sum(four) < late_join_bytes(four, "superintendent") < late_join_bytes(four, "all")
-    assert late_join_bytes([1000.0], "superintendent") == MIN_SERVER_MEMORY_BYTES  # the layout's static data
+    assert late_join_bytes([1000.0], "superintendent") == MIN_SERVER_MEMORY_BYTES  # two keyframe intervals
+    pictures = [25_000.0] * 2  # two shown cameras' JPEGs: no keyframe to keep, each cone's figures
+    assert late_join_bytes(pictures, "superintendent", 0, videos=False) == MIN_PICTURES_SERVER_BYTES
+    assert (late_join_bytes(pictures, "superintendent", 4, videos=False)
+            - late_join_bytes(pictures, "superintendent", 3, videos=False)) == LATE_JOIN_S * VIEW_FIGURE_BYTES_PER_S
     cmd = live_viewer_command(web=True, server_bytes=late_join_bytes(four, "all"))
     assert cmd[cmd.index("--server-memory-limit") + 1] == f"{late_join_bytes(four, 'all')}B"
 

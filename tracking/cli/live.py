@@ -118,8 +118,8 @@ def live(
     rrd, out = _session_files(the_rig, rrd, out)
     fox_address = _check_ports(bind, spawn, web, foxglove, port, grpc_port, web_port)
     warn_rig(the_rig)  # once the inputs are accepted: bad input stays the one line on stderr
-    server_bytes = _server_bytes(the_rig, viewer_scope, view_image_rate, view_image_width) if web else None
-    viewer_process = start_live_viewer(web, bind, grpc_port, web_port, server_bytes) if spawn or web else None
+    kept = server_bytes(the_rig, viewer_scope, view_image_rate, view_image_width) if web else None
+    viewer_process = start_live_viewer(web, bind, grpc_port, web_port, kept) if spawn or web else None
     if web:
         console.print(f"web viewer: {web_viewer_url(resolve_bind(bind), grpc_port, web_port)}")
     session = LiveSession(the_rig, rrd, out, viewer_process=viewer_process, stale_s=stale)
@@ -146,17 +146,20 @@ def live(
         session.print_summary()
 
 
-def _server_bytes(rig: Rig, scope: ViewerScope, image_rate: float, image_width: int) -> int:
+def server_bytes(rig: Rig, scope: ViewerScope, image_rate: float, image_width: int) -> int:
     """What the web server keeps for a page opened late (viewer.playback.late_join_bytes): the superintendent's
-    scope sends pictures at image_rate and image_width (0: the videos), "all" the videos."""
+    scope sends pictures at image_rate and image_width (0: the videos), "all" the videos; each cone's figures."""
     from tracking.sources import byte_rate
     from viewer.playback import late_join_bytes
     from viewer.session import view_bytes_per_s
+    from viewer.superintendent import marked_cones
 
     rates = [byte_rate(rig, c) for c in rig.cameras]
+    pictures = scope == ViewerScope.SUPERINTENDENT and image_rate > 0
     if scope == ViewerScope.SUPERINTENDENT:
         rates = [view_bytes_per_s(r, image_rate, image_width) for r in rates]
-    return late_join_bytes(rates, scope.value)
+    cones = len(marked_cones(rig) | set(rig.cones))
+    return late_join_bytes(rates, scope.value, cones, videos=not pictures)
 
 
 def _session_files(rig: Rig, rrd: Path | None, out: Path | None) -> tuple[Path, Path]:
