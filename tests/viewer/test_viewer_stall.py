@@ -20,7 +20,7 @@ from tests.conftest import FPS, REPO, T0
 from tests.viewer.test_playback import free_port
 from viewer.readback import chunks_by_entity, component_rows
 
-CAPTURE_S = 30.0  # capture time a session runs (--duration, the clip looped): before the fix ("all" scope), recording
+CAPTURE_S = 20.0  # capture time a session runs (--duration, the clip looped): before the fix ("all" scope), recording
 # and CSV stopped 10 s in (1 s segments; 18 s with 5 s segments), at the first segment boundary after the viewer's
 # server had stopped taking data (1024 messages or 128 MB queued for the stuck page)
 START_S = 30.0  # the session's start (workers loading, the viewer's server listening), on a loaded 2-core machine
