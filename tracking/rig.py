@@ -399,6 +399,10 @@ class Rig(_Model):
         """Markers keyed by id."""
         return {m.id: m for m in self.markers}
 
+    def all_cones(self) -> list[str]:
+        """Every cone, sorted: its pairs' cones and the cones whose tips are surveyed (a cone without markers)."""
+        return sorted({p.cone for p in self.all_pairs()} | set(self.cones))
+
     def all_pairs(self) -> list[Pair]:
         """The listed pairs, or, if none are listed, every jacket/topside marker on the same cone and face."""
         if self.pairs:

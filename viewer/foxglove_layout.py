@@ -127,8 +127,7 @@ def foxglove_layout(cameras: Sequence[str], cones: Sequence[str]) -> fl.Layout:
 
 def rig_layout(rig: Rig) -> fl.Layout:
     """The layout for a rig's cameras and cones (its pairs' cones and surveyed tips)."""
-    cones = sorted({p.cone for p in rig.all_pairs()} | set(rig.cones))
-    return foxglove_layout([c.name for c in rig.cameras], cones)
+    return foxglove_layout([c.name for c in rig.cameras], rig.all_cones())
 
 
 def layout_json(layout: fl.Layout) -> str:

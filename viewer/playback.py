@@ -36,8 +36,9 @@ LATE_JOIN_S = 6.0  # s: a web page opened late is sent about this much of the pa
 VIEW_OVERHEAD_BYTES_PER_S = {"superintendent": 10_000, "all": 100_000}  # per camera, what a live viewer's stream
 # carries beyond the camera's images: its detections drawn (superintendent), or the detections, poses and health as
 # recorded (all). Measured on config2-procedure5, 4 cameras at 15 FPS, 920×600, the live path flat out into a file
-VIEW_FIGURE_BYTES_PER_S = 60_000  # per cone, its figures (text, bull's-eye, trend): 6 parts, a chunk each per
-# batch (viewer.session.BATCH_TICK_S), 2-5 kB, mostly their schemas; measured on the tests' one-cone installation
+VIEW_FIGURE_BYTES_PER_S = 45_000  # per cone, its figures (text, bull's-eye, trend): 6 parts, a chunk each per
+# batch (viewer.session.BATCH_TICK_S), mostly their schemas; measured on the tests' one-cone installation, 28 s:
+# 1188 KiB in 339 chunks (43 kB/s; 62 kB/s in 9 chunks a batch before)
 MIN_SERVER_MEMORY_BYTES = 4 << 20  # a web server sent videos keeps at least this: two 2-second keyframe intervals
 # of four cameras at 2 Mbit/s, so the oldest kept frame has its keyframe
 MIN_PICTURES_SERVER_BYTES = 512 << 10  # one sent pictures (each a JPEG of its own) and figures: the layout and the
@@ -231,7 +232,7 @@ def viewer_command(recording: Path, web: bool = False, address: str = "127.0.0.1
     return [rerun_binary(), str(recording), "--bind", address, "--port", port]
 
 
-def late_join_bytes(image_bytes_per_s: list[float], scope: str, cones: int = 1, videos: bool = True) -> int:
+def late_join_bytes(image_bytes_per_s: list[float], scope: str, cones: int, videos: bool) -> int:
     """What a live web server keeps for a page opened late, bytes: LATE_JOIN_S of the viewer's stream, from each
     camera's images (bytes/s: its video, tracking.sources.byte_rate, or its pictures, viewer.session.view_bytes_per_s),
     the scope's overhead per camera and the figures of `cones` cones; at least two keyframe intervals when `videos`."""

@@ -178,7 +178,7 @@ class Recorder:
             flush_tick=BATCH_TICK_S, flush_num_bytes=BATCH_BYTES))
         self.cameras: dict[str, CameraModel] = {c.name: load_camera(rig.resolve(c.calibration)) for c in rig.cameras}
         self.marked = marked_cones(rig)  # cones with marker pairs
-        self.cones = sorted(self.marked | set(rig.cones))
+        self.cones = rig.all_cones()
         self._cone_points = cone_points(rig)  # where each cone's offset applies, as the filter has it
         self.status = StatusBoard()
         self._truth_cones = {c[len("cone_"):-len("_dx")] for c in truth.columns

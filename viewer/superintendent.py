@@ -59,7 +59,7 @@ TREND_S = 60.0
 VIEW_BEHIND_S = 3.0  # a view whose input is this far behind the live clock shows its cones grey: its figures are old
 WALL_CLOCK_AFTER = 1e9  # capture times beyond this are Unix times (live cameras), shown as the time of day
 WHY_Y_MM = 0.5 * TOLERANCE_MM  # NO DATA's reason: inside the ring, below its centre (clear of the compass words)
-ARROW_RADIUS = -2.5  # the arrow beyond the ring: 2.5 UI points (rr.components.Radius.ui_points: negative)
+ARROW_PX = 2.5  # the arrow beyond the ring's half-width, UI points
 NOWHERE = np.zeros((0, 2))  # an empty batch: the part is gone from the view from this time on
 TARGET_COLORS = {"green": (40, 200, 80), "amber": (255, 170, 0), "red": (230, 40, 40), "none": (140, 140, 140)}
 RING_COLOR = (200, 200, 200)
@@ -300,8 +300,8 @@ def log_arrow(rec: rr.RecordingStream, path: str, origin: np.ndarray | None = No
     if origin is None:
         rr.log(path, rr.Arrows2D(origins=NOWHERE, vectors=NOWHERE, colors=[], radii=[], labels=[]), recording=rec)
         return
-    rr.log(path, rr.Arrows2D(origins=[origin], vectors=[vector], colors=[color], radii=[ARROW_RADIUS],
-                             labels=[label]), recording=rec)
+    rr.log(path, rr.Arrows2D(origins=[origin], vectors=[vector], colors=[color],
+                             radii=rr.components.Radius.ui_points(ARROW_PX), labels=[label]), recording=rec)
 
 
 def log_trend(rec: rr.RecordingStream, cone: str, concentricity_mm: float, bound_mm: float) -> None:

@@ -127,14 +127,16 @@ def test_what_a_late_web_page_is_sent_follows_the_cameras_byte_rates(installatio
     assert byte_rate(rig, entry.model_copy(update={"source": "0"})) == ENCODE_BITRATE / 8
     assert byte_rate(rig, entry.model_copy(update={"source": "rtsp://10.0.0.5/s"})) == STREAM_ASSUMED_BITRATE / 8
     four = [STREAM_ASSUMED_BITRATE / 8] * 4  # four network cameras: about LATE_JOIN_S of their video and figures
-    assert LATE_JOIN_S * sum(four) < late_join_bytes(four, "superintendent") < late_join_bytes(four, "all")
-    assert late_join_bytes([1000.0], "superintendent") == MIN_SERVER_MEMORY_BYTES  # two keyframe intervals
+    assert (LATE_JOIN_S * sum(four) < late_join_bytes(four, "superintendent", 2, videos=True)
+            < late_join_bytes(four, "all", 2, videos=True))
+    assert late_join_bytes([1000.0], "superintendent", 1, videos=True) == MIN_SERVER_MEMORY_BYTES  # keyframes
     pictures = [25_000.0] * 2  # two shown cameras' JPEGs: no keyframe to keep, each cone's figures
     assert late_join_bytes(pictures, "superintendent", 0, videos=False) == MIN_PICTURES_SERVER_BYTES
     assert (late_join_bytes(pictures, "superintendent", 4, videos=False)
             - late_join_bytes(pictures, "superintendent", 3, videos=False)) == LATE_JOIN_S * VIEW_FIGURE_BYTES_PER_S
-    cmd = live_viewer_command(web=True, server_bytes=late_join_bytes(four, "all"))
-    assert cmd[cmd.index("--server-memory-limit") + 1] == f"{late_join_bytes(four, 'all')}B"
+    kept = late_join_bytes(four, "all", 2, videos=True)
+    cmd = live_viewer_command(web=True, server_bytes=kept)
+    assert cmd[cmd.index("--server-memory-limit") + 1] == f"{kept}B"
 
 
 def test_freeze_is_noticed_after_its_limit() -> None:

@@ -165,10 +165,10 @@ def test_a_cone_beyond_the_ring_is_drawn_on_it_with_an_arrow_and_its_distance(tm
     _, why = component_rows(chunks[f"{base}/why"], "Points2D:labels")
     assert where[:2] == [[], []] and len(where[2]) == 1 and why == [[], [], ["NO DATA: newest 0.8 s old"]]  # says why
     assert stale.state == ConeState.NO_DATA
+    assert all(len(chunks[f"{base}/{part}"]) == 1 for part in ("offset", "beyond", "why"))  # one chunk a batch
     _, trend = component_rows(chunks[f"/{ROOT}/trend/A"], "Scalars:scalars")  # concentricity, r + 2σ, tolerance
     assert trend[0][0] == pytest.approx(500.0) and np.isnan(trend[2][0])  # a gap while there is no data
     assert [row[2] for row in trend] == [TOLERANCE_MM] * 3
-    assert all(len(chunks[f"{base}/{part}"]) == 1 for part in ("offset", "beyond", "why"))  # one chunk a batch
     assert far.concentricity > TOLERANCE_M > near.concentricity
 
 

@@ -152,14 +152,12 @@ def server_bytes(rig: Rig, scope: ViewerScope, image_rate: float, image_width: i
     from tracking.sources import byte_rate
     from viewer.playback import late_join_bytes
     from viewer.session import view_bytes_per_s
-    from viewer.superintendent import marked_cones
 
     rates = [byte_rate(rig, c) for c in rig.cameras]
     pictures = scope == ViewerScope.SUPERINTENDENT and image_rate > 0
     if scope == ViewerScope.SUPERINTENDENT:
         rates = [view_bytes_per_s(r, image_rate, image_width) for r in rates]
-    cones = len(marked_cones(rig) | set(rig.cones))
-    return late_join_bytes(rates, scope.value, cones, videos=not pictures)
+    return late_join_bytes(rates, scope.value, len(rig.all_cones()), videos=not pictures)
 
 
 def _session_files(rig: Rig, rrd: Path | None, out: Path | None) -> tuple[Path, Path]:
