@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from tracking.errors import InputError
 
@@ -30,6 +29,8 @@ MAX_FRAMES = 10_000_000  # a sidecar frame number beyond this is a typo (six hou
 
 def read_frame_times(path: Path) -> np.ndarray:
     """(N,) capture times, s, by frame number (NaN where the file lists no time) from a sidecar CSV."""
+    import pandas as pd  # here, not at the top: every command loads rigs, few have times files (0.5 s at start)
+
     try:
         df = pd.read_csv(path)
     except FileNotFoundError:

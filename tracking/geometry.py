@@ -13,7 +13,6 @@ from collections.abc import Callable
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 JACOBIAN_STEP = 1e-6  # rad or m: forward differences of numeric Jacobians
 
@@ -37,6 +36,8 @@ def rotation(v: np.ndarray) -> np.ndarray:
 
 def rotations(v: np.ndarray) -> np.ndarray:
     """(N, 3, 3) rotation matrices of rotation vectors (N, 3) (exact for small angles too)."""
+    from scipy.spatial.transform import Rotation  # here: scipy costs every command 0.3 s at start
+
     return Rotation.from_rotvec(np.asarray(v, dtype=float).reshape(-1, 3)).as_matrix()
 
 
@@ -89,6 +90,8 @@ def quaternion_rotation(q: np.ndarray) -> np.ndarray:
 
 def quaternions_xyzw(R: np.ndarray) -> np.ndarray:
     """(N, 4) unit quaternions x, y, z, w of rotation matrices (N, 3, 3)."""
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_matrix(np.asarray(R, dtype=float).reshape(-1, 3, 3)).as_quat()
 
 
@@ -144,6 +147,8 @@ def pose_residual(T_measured: np.ndarray, T_predicted: np.ndarray) -> np.ndarray
 def between(poses: list[np.ndarray]) -> np.ndarray:
     """(4, 4) the pose midway between poses (4, 4) close to each other: their mean rotation vector about the first,
     their mean translation."""
+    from scipy.spatial.transform import Rotation
+
     R_0 = poses[0][:3, :3]
     R = Rotation.from_rotvec(np.mean([Rotation.from_matrix(P[:3, :3] @ R_0.T).as_rotvec() for P in poses], axis=0))
     return transform(R.as_matrix() @ R_0, np.mean([P[:3, 3] for P in poses], axis=0))

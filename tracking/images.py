@@ -6,13 +6,16 @@ import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import av
 import cv2
 import numpy as np
 
 from tracking.errors import InputError
 from tracking.frame_times import FrameClock, as_clock
+
+if TYPE_CHECKING:  # PyAV is imported where a video is opened: at every command's start it would cost 0.1 s
+    import av
 
 LUMA_FIRST_FORMATS = {"yuv420p", "yuvj420p", "yuv422p", "yuvj422p", "yuv444p", "yuvj444p", "nv12", "nv21", "gray"}
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm"}
@@ -66,6 +69,8 @@ class VideoHealth:
 
     def declare(self, container: av.container.InputContainer, source: str | Path) -> None:
         """Take the source's name, nominal interval, and the frames or duration its container declares."""
+        import av
+
         stream = container.streams.video[0]
         rate = stream.guessed_rate or stream.average_rate  # the camera's rate; the average one counts gaps in
         self.source = str(source) if "://" in str(source) else Path(source).name
@@ -222,6 +227,8 @@ def read_gray(path: str | Path) -> np.ndarray:
 
 def open_video(source: str | Path, options: dict[str, str] | None = None) -> av.container.InputContainer:
     """A video container opened with PyAV; a one-line error when it cannot be."""
+    import av
+
     try:
         container = av.open(str(source), options=options or {})
     except (av.error.FFmpegError, OSError) as exc:
@@ -249,6 +256,8 @@ def decoded_frames(container: av.container.InputContainer, source: str | Path, t
     from a damaged packet, is dropped. chunk: (pts of a keyframe, None for the first; packets to decode from it, None
     for all): only that part, decoded on its own; frame numbers count from the keyframe (tracking.parallel puts them
     back)."""
+    import av
+
     clock = as_clock(time_offset)
     stream = container.streams.video[0]
     stream.thread_type = threads
@@ -302,6 +311,8 @@ def chunk_packets(container: av.container.InputContainer, stream: av.video.strea
                   chunk: tuple[int | None, int | None] | None) -> Iterator[av.Packet]:
     """The stream's packets: all of them, or a chunk's (keyframe pts or None for the first, packet count or None)
     then an empty packet that flushes the decoder. A seek that does not land on the keyframe raises ValueError."""
+    import av
+
     if chunk is None:
         yield from container.demux(stream)
         return

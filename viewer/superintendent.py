@@ -338,8 +338,7 @@ def cone_column(cone: str, camera: str | None, marked: bool = True) -> rrb.Verti
 def superintendent_blueprint(rig: Rig, cone_cameras: Mapping[str, str]) -> rrb.Blueprint:
     """A column per cone (figures, live image, bull's-eye, trend) above the camera table."""
     marked = marked_cones(rig)
-    cones = sorted(rig.cones) or sorted(marked)
-    columns = [cone_column(cone, cone_cameras.get(cone), cone in marked) for cone in cones]
+    columns = [cone_column(cone, cone_cameras.get(cone), cone in marked) for cone in rig.all_cones()]
     return rrb.Blueprint(
         rrb.Vertical(rrb.Horizontal(*columns, name="cones"),
                      rrb.TextDocumentView(origin=f"{ROOT}/cameras", name="cameras"), row_shares=[4, 1]),

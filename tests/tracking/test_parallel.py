@@ -137,7 +137,8 @@ def track(clip: Path, out: Path, name: str, *args: str) -> subprocess.CompletedP
 
 
 def test_workers_and_ray_write_the_same_outputs(clip: Path, tmp_path: Path) -> None:
-    runs = {"one": ("--workers", "1"), "two": ("--workers", "2"), "ray": ("--ray", "--workers", "2")}
+    runs = {"one": ("--workers", "1"), "ray": ("--ray", "--workers", "2")}  # two local workers: as Ray's, in-process
+    # (test_chunked_frames_are_one_pass_frames); the outputs are written here whatever ran the chunks
     for name, args in runs.items():
         proc = track(clip, tmp_path, name, *args)
         assert proc.returncode == 0, proc.stderr
@@ -146,10 +147,9 @@ def test_workers_and_ray_write_the_same_outputs(clip: Path, tmp_path: Path) -> N
     assert csv.count(b"\n") > 100
     rrd, mcap = rrd_rows(tmp_path / "one.rrd"), mcap_content(tmp_path / "one.mcap")
     assert sum(rrd.values()) > 1000 and sum(mcap[0].values()) > 1000
-    for name in ("two", "ray"):
-        assert (tmp_path / f"{name}.csv").read_bytes() == csv, name
-        assert rrd_rows(tmp_path / f"{name}.rrd") == rrd, name
-        assert mcap_content(tmp_path / f"{name}.mcap") == mcap, name
+    assert (tmp_path / "ray.csv").read_bytes() == csv
+    assert rrd_rows(tmp_path / "ray.rrd") == rrd
+    assert mcap_content(tmp_path / "ray.mcap") == mcap
 
 
 def test_a_workers_error_is_one_line(clip: Path, tmp_path: Path) -> None:

@@ -192,6 +192,14 @@ def test_every_cone_gets_the_same_column_observed_or_not(installation: Path) -> 
         "A: no camera yet"
 
 
+def test_a_paired_cone_without_a_surveyed_tip_gets_its_column(installation: Path) -> None:
+    rig = load_rig(installation / "rig.yaml")
+    rig = rig.model_copy(update={"cones": {"B": CONES["B"]}})  # tips surveyed at B only; the pairs are at A
+    columns = superintendent_blueprint(rig, {}).root_container.contents[0].contents
+    images = [column.contents[1].name for column in columns]
+    assert images == ["A: no camera yet", "B: no markers"]  # the live session logs both: the layout shows both
+
+
 def test_a_cone_without_markers_says_so_in_its_images_place(installation: Path, tmp_path: Path) -> None:
     rig = load_rig(installation / "rig.yaml").model_copy(update={"cones": CONES})
     rec = recording(tmp_path / "notes.rrd")

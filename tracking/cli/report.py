@@ -22,10 +22,10 @@ def report(
     """Write an installation's report: per cone whether and when it landed within the tolerance and how sure, its
     offsets over time with NO DATA and why, the cameras' timeline, the rig's clocks and survey, the events with the
     command that opens the record there, and what it summarises (software, digests, the archive's check)."""
+    check_outputs({"--out": out, "--pdf": pdf}, [record, key])  # before the reader's imports (3 s)
     from viewer.installation_record import read_record
     from viewer.report import write_report
 
-    check_outputs({"--out": out, "--pdf": pdf}, [record, key])
     summary = write_report(read_record(record, key), out, write_text, pdf, write_bytes)
     for c in summary.cones:
         console.print(f"cone {c.cone}: {c.headline}", markup=False, soft_wrap=True)

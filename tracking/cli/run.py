@@ -217,16 +217,20 @@ def track(
     Each camera's video is cut into chunks at keyframes, tracked in worker processes (--workers) or Ray tasks
     (--ray) and fused in capture-time order, a run longer than --fusion-segment in segments over time by the same
     workers (--one-pass-fusion: in one pass here). The output is the same whatever runs the chunks and segments."""
-    from tracking.estimator import FilterReport
-    from tracking.evaluate import read_truth
-    from tracking.parallel import runner
-    from tracking.pipeline import TrackStats
     from tracking.rig import load_rig
 
-    the_rig = load_rig(rig)
+    the_rig = load_rig(rig)  # bad input first: the tracker's own imports cost a second
     check_outputs({"--out": out, "--rrd": rrd, "--mcap": mcap}, [*rig_inputs(the_rig), truth, key])
-    truth_df = read_truth(truth) if truth else None
+    truth_df = None
+    if truth:
+        from tracking.evaluate import read_truth
+
+        truth_df = read_truth(truth)
     archive = ArchiveSettings.for_track(mcap, key, vessel, operator, video)  # before any work
+    from tracking.estimator import FilterReport
+    from tracking.parallel import runner
+    from tracking.pipeline import TrackStats
+
     options = {"mode": mode.value, "refine": refine.value, **({"roi": "on"} if roi else {})}
     report, fusion, outputs = FilterReport(), Fusion(one_pass_fusion, fusion_segment), Outputs(keep_on_interrupt=True)
     loop = RunLoop(the_rig, runner(workers, ray), refine, [], TrackStats(), roi=roi, warn=True)
