@@ -265,8 +265,7 @@ def decoded_frames(container: av.container.InputContainer, source: str | Path, t
     health.declare(container, source)
     annexb = (av.bitstream.BitStreamFilterContext("h264_mp4toannexb", stream)
               if packets and passes_through(stream) else None)
-    pending: dict[int | None, list[tuple[bytes, bool]]] = {}  # pts -> packets (first in, first out: a repeated
-    # pts), until their frames leave the decoder
+    pending: dict[int | None, list[tuple[bytes, bool]]] = {}  # pts -> packets (FIFO) until their frames come out
     index = 0
     cut = False  # a packet cut short (a truncated file's last) or damaged went to the decoder
     damaged: set[int] = set()  # pts of such packets whose frames have not come out

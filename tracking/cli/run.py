@@ -221,11 +221,7 @@ def track(
 
     the_rig = load_rig(rig)  # bad input first: the tracker's own imports cost a second
     check_outputs({"--out": out, "--rrd": rrd, "--mcap": mcap}, [*rig_inputs(the_rig), truth, key])
-    truth_df = None
-    if truth:
-        from tracking.evaluate import read_truth
-
-        truth_df = read_truth(truth)
+    truth_df = optional_truth(truth)
     archive = ArchiveSettings.for_track(mcap, key, vessel, operator, video)  # before any work
     from tracking.estimator import FilterReport
     from tracking.parallel import runner
@@ -255,6 +251,15 @@ def track(
     if mode in (Mode.FUSED, Mode.SMOOTHED):
         rig_findings(rig, report, loop.stats)
     warn_cones(loop.tally)
+
+
+def optional_truth(path: Path | None) -> pd.DataFrame | None:
+    """The truth CSV, when one is given (pandas is imported only then: 0.5 s at a command's start)."""
+    if not path:
+        return None
+    from tracking.evaluate import read_truth
+
+    return read_truth(path)
 
 
 def _plan(loop: RunLoop, progress: Reporter, chunk_frames: int) -> None:
@@ -419,7 +424,7 @@ def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome, fus
     """One installation's offsets.csv (and run.rrd), its report.html and verdict with report: true, then, with a truth,
     its accuracy.md and errors in outcome."""
     from tracking.batch import ACCURACY_NAME, OFFSETS_NAME, REPORT_NAME, RRD_NAME
-    from tracking.evaluate import evaluate_runs, evaluation_markdown, read_offsets, read_truth
+    from tracking.evaluate import evaluate_runs, evaluation_markdown, read_offsets
     from tracking.outputs import write_bytes, write_text
 
     csv, rrd = inst.out / OFFSETS_NAME, (inst.out / RRD_NAME) if inst.rrd or inst.report else None
@@ -427,7 +432,7 @@ def _track_installation(inst: Installation, loop: RunLoop, outcome: Outcome, fus
     report = inst.out / REPORT_NAME if inst.report else None
     check_outputs({"out": csv, "rrd": rrd, "accuracy": accuracy, "report": report},
                   [*rig_inputs(loop.rig), inst.truth])
-    truth_df = read_truth(inst.truth) if inst.truth is not None else None
+    truth_df = optional_truth(inst.truth)
     with Outputs() as outputs:
         if rrd is not None:
             loop.sinks.append(recorder(loop.rig, outputs.claim(rrd), truth_df,
