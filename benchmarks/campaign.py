@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import time
+import warnings
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -134,6 +135,7 @@ class ConeResult:
     samples: int
     sigma: np.ndarray  # (3,) m, median stated σ per axis over the shown rows
     withheld_sigma: np.ndarray  # (3,) m, the same over the rows withheld after the warm-up
+    axes_shown: np.ndarray  # (3,) share of the time each axis is shown (an axis within the limit shows on its own)
 
 
 def cone_result(cone: str, cells: float, df: pd.DataFrame, truth: pd.DataFrame, start: float) -> ConeResult:
@@ -141,27 +143,43 @@ def cone_result(cone: str, cells: float, df: pd.DataFrame, truth: pd.DataFrame, 
     rows = df[df["cone"] == cone].sort_values("time")
     end = float(truth["time"].max())
     grid = np.arange(start + WARMUP_S, end, 1.0 / GRID_HZ)
-    shown_rows = rows.dropna(subset=["dx", "dy", "dz"])
-    valid = shown_rows["time"].to_numpy()
-    if grid.size and valid.size:
-        idx = np.searchsorted(valid, grid, side="right") - 1
-        age = np.where(idx >= 0, grid - valid[np.clip(idx, 0, None)], np.inf)
-        shown = float(np.mean(age <= MAX_AGE_S))
-    else:
-        shown = 0.0
+    axes = ["dx", "dy", "dz"]
+    valid = rows.dropna(subset=axes)["time"].to_numpy()
+    shown = shown_share(valid, grid)
+    axes_shown = np.array([shown_share(rows.dropna(subset=[a])["time"].to_numpy(), grid) for a in axes])
     first = float(valid[0] - start) if valid.size else float("nan")
     nan3 = np.full(3, np.nan)
-    late = rows[(rows["time"] >= start + WARMUP_S) & rows["dx"].isna()][["sdx", "sdy", "sdz"]].dropna()
+    late = rows[(rows["time"] >= start + WARMUP_S) & rows[axes].isna().any(axis=1)][["sdx", "sdy", "sdz"]].dropna()
     withheld_sigma = late.median().to_numpy() if len(late) else nan3
-    if not valid.size:
+    some = rows[rows[axes].notna().any(axis=1)]  # every axis-sample shown, those of partly shown rows too
+    if not len(some):
         return ConeResult(cone, cells, shown, first, nan3, nan3, float("nan"), float("nan"), nan3, 0, nan3,
-                          withheld_sigma)
-    err = shown_rows[["dx", "dy", "dz"]].to_numpy() - truth_at(truth, cone, valid)
-    sd = shown_rows[["sdx", "sdy", "sdz"]].to_numpy()
-    z = np.abs(err) / sd
-    return ConeResult(cone, cells, shown, first, np.mean(np.abs(err), axis=0), np.max(np.abs(err), axis=0),
-                      float(np.mean(z <= 2)), float(np.mean(z > 3)), np.sqrt(np.mean((err / sd) ** 2, axis=0)),
-                      len(valid), np.median(sd, axis=0), withheld_sigma)
+                          withheld_sigma, axes_shown)
+    err = some[axes].to_numpy() - truth_at(truth, cone, some["time"].to_numpy())  # NaN where an axis is withheld
+    sd = some[["sdx", "sdy", "sdz"]].to_numpy()
+    z = (np.abs(err) / sd)[np.isfinite(err)]
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an axis never shown: its figures NaN
+        return ConeResult(cone, cells, shown, first, np.nanmean(np.abs(err), axis=0), np.nanmax(np.abs(err), axis=0),
+                          float(np.mean(z <= 2)), float(np.mean(z > 3)),
+                          np.sqrt(np.nanmean((err / sd) ** 2, axis=0)), len(some),
+                          np.nanmedian(np.where(np.isfinite(err), sd, np.nan), axis=0), withheld_sigma, axes_shown)
+
+
+def axes_text(f: ConeResult) -> str:
+    """'axes 0/98/98%' where some axis was shown longer than the whole offset (its others withheld), else ''."""
+    if not (f.axes_shown > f.shown + 0.005).any():
+        return ""
+    return "axes " + "/".join(f"{v * 100:.0f}" for v in f.axes_shown) + "%"
+
+
+def shown_share(times: np.ndarray, grid: np.ndarray) -> float:
+    """Share of the grid's times (G,) with a shown estimate at most MAX_AGE_S old, from the shown times (N,), sorted."""
+    if not (grid.size and times.size):
+        return 0.0
+    idx = np.searchsorted(times, grid, side="right") - 1
+    age = np.where(idx >= 0, grid - times[np.clip(idx, 0, None)], np.inf)
+    return float(np.mean(age <= MAX_AGE_S))
 
 
 def run(seed: int) -> dict:
@@ -228,7 +246,9 @@ def misses(r: dict) -> list[str]:
             continue
         if f.shown < SHOWN_TARGET:
             seen = ", ".join(f"{c} {px:.1f} px/cell" for c, px in r.get("seen", {}).get(cone, []))
-            out.append(f"{cone} shown {f.shown:.0%} (withheld at σ {_mm(f.withheld_sigma)} mm; seen by {seen})")
+            axes = axes_text(f)
+            out.append(f"{cone} shown {f.shown:.0%} (withheld at σ {_mm(f.withheld_sigma)} mm; seen by {seen}"
+                       f"{'; ' + axes if axes else ''})")
         for label, m in (("fused", f), ("smoothed", s)):
             if m.samples and not honest(m):
                 out.append(f"{cone} {label} {m.within:.0%} within 2σ, {m.beyond:.1%} beyond 3σ")
@@ -268,7 +288,8 @@ def installation_rows(r: dict) -> list[str]:
     for cone, modes in r["cones"].items():
         f, s = modes["fused"], modes["smoothed"]
         first = f"{f.first_s:.1f}" if np.isfinite(f.first_s) else "never"
-        lines.append(f"| {r['seed']} | {cone} | {f.cell_px:.1f} | {f.shown:.0%} | {first} | {_mm(f.mae)} | "
+        axes = f" ({axes_text(f)})" if axes_text(f) else ""
+        lines.append(f"| {r['seed']} | {cone} | {f.cell_px:.1f} | {f.shown:.0%}{axes} | {first} | {_mm(f.mae)} | "
                      f"{_mm(f.emax)} | {f.within:.0%} / {f.beyond:.1%} | {s.within:.0%} / {s.beyond:.1%} | "
                      f"{'/'.join(f'{v:.2f}' for v in f.rms_z)} | {cams} |")
         cams = ""
@@ -298,7 +319,8 @@ def summary(results: list[dict]) -> list[str]:
         f"- σ honest (≥ {COVERAGE_TARGET[0]:.0%} within 2σ, ≤ {COVERAGE_TARGET[1]:.0%} beyond 3σ), cone-modes: "
         f"{sum(honest(m) for m in covered)} of {len(covered)}; at cones without a pair (offsets through the rigid "
         f"topside): {sum(honest(m) for m in blind)} of {len(blind)}",
-        f"- RMS e/σ ≥ {RMS_TARGET} on every axis (fused): {sum((v >= RMS_TARGET).all() for v in rms)} of {len(rms)}",
+        f"- RMS e/σ ≥ {RMS_TARGET} on every axis shown (fused): {sum(not (v < RMS_TARGET).any() for v in rms)} of "
+        f"{len(rms)}",
         f"- cones seen at ≥ {SHARP_CELL_PX:g} px/cell: {len(sharp)}; e_MAE ≤ {MAE_TARGET_M * 1000:.0f} mm and "
         f"|e|max ≤ {MAX_TARGET_M * 1000:.0f} mm per axis (fused): "
         f"{len(accurate) - len(inaccurate)} of {len(accurate)}; mean e_MAE {_mm(pooled_mae)} mm; of the "

@@ -52,7 +52,7 @@ from tracking.disagreements import (
     tilt_disagreements,
 )
 from tracking.errors import InputError
-from tracking.estimate import WITHHELD_BELOW, ConeEstimate
+from tracking.estimate import WITHHELD_BELOW, ConeEstimate, axes_above
 from tracking.estimator import TopsideFilter, cone_points, filter_frame, point_offset_matrix
 from tracking.estimator.noise import MOUNT_MISMATCH, REPORT_MAX_SIGMA_M, STATE
 from tracking.estimator.state import topside_pose
@@ -365,7 +365,7 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
     by_id = rig.marker_by_id
     topside = [s for s in sights if s.counts and by_id[s.marker].body == "topside"]
     everyone = tuple(sorted({s.camera for s in topside}))
-    cones = sorted({*rig.cones, *(p.cone for p in rig.all_pairs())})
+    cones = rig.all_cones()
     by_cone = {e.cone: e for e in estimates}
     out = []
     for cone in cones:
@@ -385,8 +385,10 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
             reason = f"{source}; the filter gave no estimate in these seconds: it would show NO DATA{depth}"
         elif worst > REPORT_MAX_SIGMA_M:
             verdict = "weak" if has_markers and cameras else "blind"
+            poor = axes_above(e.sigma, REPORT_MAX_SIGMA_M) if e is not None else ""
+            partly = f" on {poor} (its other axes alone)" if poor and poor.count("Δ") < 3 else ""
             reason = (f"{source}; {mm} is above the {REPORT_MAX_SIGMA_M * 1000:.0f} mm report limit: it would show "
-                      f"NO DATA{depth}")
+                      f"NO DATA{partly}{depth}")
         elif worst > READY_MAX_SIGMA_M:
             verdict, reason = "weak", (f"{source}; {mm} is above the {READY_MAX_SIGMA_M * 1000:.0f} mm a ready cone "
                                        f"has{depth}")

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tracking.estimate import ConeEstimate, axes_above, sigma_text
+from tracking.estimate import AXIS_NAMES, ConeEstimate, axes_above, sigma_text
 from tracking.offsets import PairOffset
 
 if TYPE_CHECKING:  # the estimator's package is the CLI's heaviest import: `track` loads it when it fuses
@@ -32,12 +32,15 @@ class ConeTally:
     withheld: Counter = field(default_factory=Counter)  # reason -> estimates withheld for it
     least_sigma: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))  # (3,) m, per axis over the estimates
     pair_frames: Counter = field(default_factory=Counter)  # camera -> its frames that measured a pair at the cone
+    axes_shown: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=int))  # (3,) estimates showing each axis
 
     def add(self, e: ConeEstimate) -> None:
         """Count one estimate of this cone."""
         self.estimates += 1
         self.least_sigma = np.fmin(self.least_sigma, e.sigma)  # NaN (no covariance) leaves it
-        if np.isfinite(e.offset).all():
+        finite = np.isfinite(e.offset)
+        self.axes_shown += finite
+        if finite.all():
             self.shown += 1
             if not np.isfinite(self.first_shown):
                 self.first_shown = e.time
@@ -65,6 +68,9 @@ class ConeTally:
         cams = sorted(self.pair_frames)
         head = (f"cone {self.cone}: never shown ({reasons}): its σ came no lower than {self.sigma_text()}, above the "
                 f"{REPORT_MAX_SIGMA_M * 1000:.0f} mm limit on {along}")
+        if self.axes_shown.any():  # the axes within the limit were shown on their own
+            head += "; " + ", ".join(f"{a} shown {n / max(self.estimates, 1):.0%}" for a, n in
+                                     zip(AXIS_NAMES, self.axes_shown, strict=True) if n)
         if not cams:
             return f"{head}: no camera measured a marker pair there (its offset came through the topside alone)"
         if len(cams) == 1:

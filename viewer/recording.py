@@ -442,8 +442,9 @@ def concentricity(offset: np.ndarray) -> float:
 
 
 def cone_state(offset: np.ndarray) -> str:
-    """'NO DATA' unless every axis is known; then within or outside the concentricity tolerance."""
-    if not np.all(np.isfinite(offset)):
+    """'NO DATA' unless the horizontal offset (dx, dy) is known; then within or outside the concentricity tolerance
+    (a height withheld alone leaves it standing, as on the tablet)."""
+    if not np.all(np.isfinite(offset[:2])):
         return "NO DATA"
     return f"within ±{TOLERANCE_M} m" if concentricity(offset) <= TOLERANCE_M else "outside"
 

@@ -32,6 +32,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from tracking.estimate import (
+    AXIS_NAMES,
     WITHHELD_BELOW,
     WITHHELD_CLOCKS,
     WITHHELD_COMPARING,
@@ -109,7 +110,8 @@ def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_meas
     more than VIEW_BEHIND_S, NO DATA (its figures are that old)."""
     age = np.inf if last_measurement is None else max(0.0, now - last_measurement)
     late = behind > VIEW_BEHIND_S
-    if estimate is None or not np.all(np.isfinite(estimate.offset)) or age > stale_s or late:
+    if estimate is None or not np.all(np.isfinite(estimate.offset[:2])) or age > stale_s or late:  # (Δz may be
+        # withheld alone: the concentricity stands without it)
         offset = np.full(3, np.nan) if estimate is None else estimate.offset
         withheld = estimate.withheld if estimate is not None and age <= stale_s else ""
         axis_sigma = estimate.sigma if estimate is not None else np.full(3, np.nan)
@@ -125,7 +127,8 @@ def cone_reading(estimate: ConeEstimate | None, cone: str, now: float, last_meas
         state = ConeState.AMBER
     else:
         state = ConeState.GREEN
-    return ConeReading(cone, state, r, sigma, estimate.offset, age, estimate.cameras, now=now, behind=behind)
+    return ConeReading(cone, state, r, sigma, estimate.offset, age, estimate.cameras, now=now, behind=behind,
+                       axis_sigma=estimate.sigma)
 
 
 def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool = False) -> str:
@@ -157,9 +160,18 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
     figures = f" (σ {sigma_text(sigma)})" if np.isfinite(sigma).all() else ""
     poor = axes_above(sigma, REPORT_MAX_SIGMA_M)
     along = f" along {poor} (a camera seeing it from another side would measure that)" if poor else ""
+    known = axes_text(reading.offset, sigma)
     return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for 1 m markers in "
             f"the first {REPORT_WARMUP_S:g} s after the topside is placed){figures}: the cameras do not see this cone "
-            f"well enough{along}")
+            f"well enough{along}" + (f". Measured: {known}" if known else ""))
+
+
+def axes_text(offset: np.ndarray, sigma: np.ndarray) -> str:
+    """The axes an offset (3,) m shows, each with its 2σ from sigma (3,) m, e.g. 'Δy +12 ±8 · Δz +1234 ±40 mm (2σ)';
+    empty when it shows none."""
+    parts = [f"{a} {v * 1000:+.0f} ±{CONFIDENCE_SIGMAS * s * 1000:.0f}"
+             for a, v, s in zip(AXIS_NAMES, offset, sigma, strict=True) if np.isfinite(v)]
+    return " · ".join(parts) + " mm (2σ)" if parts else ""
 
 
 def cones_line(readings: Sequence[ConeReading], stale_s: float = STALE_S) -> str:
@@ -169,11 +181,13 @@ def cones_line(readings: Sequence[ConeReading], stale_s: float = STALE_S) -> str
     parts = []
     for r in readings:
         if r.state == ConeState.NO_DATA:
-            parts.append(f"{r.cone} NO DATA ({no_data_reason(r, stale_s, short=True)})")
+            why = no_data_reason(r, stale_s, short=True)
+            known = axes_text(r.offset, r.axis_sigma) if why == WITHHELD_SIGMA else ""
+            parts.append(f"{r.cone} NO DATA ({why}{'; ' + known if known else ''})")
             continue
         dx, dy, dz = (1000 * v for v in r.offset)
         parts.append(f"{r.cone} {r.state.name} {1000 * r.concentricity:.0f}±{1000 * r.sigma:.0f} mm "
-                     f"(Δx {dx:+.0f} Δy {dy:+.0f} Δz {dz:+.0f})")
+                     f"(Δx {dx:+.0f} Δy {dy:+.0f} Δz {_mm(dz)})")
     return " · ".join(parts)
 
 
@@ -185,9 +199,14 @@ def cone_markdown(reading: ConeReading, stale_s: float = STALE_S) -> str:
     return (f"# {reading.cone}: {reading.concentricity * 1000:.0f} mm\n\n"
             f"**{HEADLINES[reading.state]}** · ±{CONFIDENCE_SIGMAS * reading.sigma * 1000:.0f} mm (2σ) of "
             f"{TOLERANCE_MM:.0f}\n\n"
-            f"Δx {dx * 1000:+.0f} · Δy {dy * 1000:+.0f} · Δz {dz * 1000:+.0f} mm · "
+            f"Δx {dx * 1000:+.0f} · Δy {dy * 1000:+.0f} · Δz {_mm(dz * 1000)} mm · "
             f"{', '.join(reading.cameras) or 'the filter alone'} · {reading.age:.2f} s old"
             + (f" at {clock_text(reading.now)}" if np.isfinite(reading.now) else ""))
+
+
+def _mm(value: float) -> str:
+    """A signed figure in mm, or '—' for an axis withheld (its σ above the limit)."""
+    return f"{value:+.0f}" if np.isfinite(value) else "—"
 
 
 def clock_text(t: float) -> str:

@@ -9,7 +9,7 @@ import pytest
 
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetection
-from tracking.estimate import WITHHELD_CLOCKS
+from tracking.estimate import WITHHELD_CLOCKS, WITHHELD_SIGMA
 from tracking.estimator import TopsideFilter, fused_estimates, smoothed_estimates
 from tracking.estimator.noise import REPORT_WARMUP_S, VIEW_BIAS_TAU_S
 from tracking.estimator.process import PoseMotionLevel
@@ -91,6 +91,20 @@ def test_unobservable_cones_are_not_reported() -> None:
     the_rig = rig()
     est = [e for e in fused_estimates(the_rig, stream(the_rig, 10.0)) if e.cone in "BC" and e.time > 2.0]
     assert all(np.isnan(e.offset).all() and np.sqrt(e.covariance[2, 2]) > 0.05 for e in est)
+
+
+def test_a_cone_seen_from_one_side_shows_the_axes_it_sees() -> None:
+    """One camera per cone, each along another axis (A from ahead: its depth is y; D from port: x): an axis whose σ is
+    above the limit is withheld alone, the others shown within their σ, each row saying why it is not whole."""
+    the_rig = rig({("A", "ahead"): (0, 1), ("D", "port"): (4, 5)})
+    est = [e for e in fused_estimates(the_rig, stream(the_rig, 10.0)) if e.time > 2.0 and e.cone in "AD"]
+    partly = [e for e in est if np.isfinite(e.offset).any() and not np.isfinite(e.offset).all()]
+    assert len(partly) > 0.3 * len(est) and {e.withheld for e in partly} == {WITHHELD_SIGMA}
+    for e in partly:
+        shown = np.isfinite(e.offset)
+        assert (e.sigma[shown] <= 0.05).all() and (e.sigma[~shown] > 0.05).all()  # (after the warm-up: whole in it)
+        error = e.offset[shown] - true_offset(e.time, np.array(the_rig.cones[e.cone]))[shown]
+        assert (np.abs(error) < 3 * e.sigma[shown]).all()
 
 
 def test_smoother_beats_filter() -> None:
@@ -819,7 +833,7 @@ def test_the_cameras_poses_an_estimate_holds_are_those_of_its_time() -> None:
 def test_the_cameras_disagreement_floors_a_cones_sigma_and_their_comparison_holds_it_back() -> None:
     """A floor raises σ only where the filter's own is smaller (a floor, not an addition); a cone whose cameras are
     not yet compared is withheld and says so; σ too large says that first."""
-    from tracking.estimate import WITHHELD_COMPARING, WITHHELD_SIGMA
+    from tracking.estimate import WITHHELD_COMPARING
     from tracking.estimator.noise import STATE
 
     kf = TopsideFilter(camera_rig())

@@ -15,7 +15,7 @@ from rerun.chunk import RrdReader
 
 from tracking.estimate import WITHHELD_CLOCKS, WITHHELD_SCALE, ConeEstimate
 from viewer.readback import chunks_by_entity, component_rows
-from viewer.superintendent import ConeState, clock_text, cone_markdown, cone_reading, no_data_reason
+from viewer.superintendent import ConeState, clock_text, cone_markdown, cone_reading, cones_line, no_data_reason
 
 
 @pytest.fixture(scope="module")
@@ -112,6 +112,21 @@ def test_cone_states() -> None:
     assert late.state == ConeState.NO_DATA and no_data_reason(late, short=True) == "view behind by 7 s"
     assert "7 s behind the live clock" in cone_markdown(late) and viewer_safe(cone_markdown(late))
     assert re.fullmatch(r"\d\d:\d\d:\d\d", clock_text(1.7e9))  # a live camera's Unix time: the time of day
+
+
+def test_the_axes_a_camera_sees_are_shown_when_another_is_withheld() -> None:
+    """One camera alone, square on: its depth (Δx) withheld at σ 54 mm, its height and sideways offset shown within
+    their σ; a height withheld alone leaves the concentricity standing."""
+    cov = np.diag([0.054, 0.007, 0.026]) ** 2
+    depth = cone_reading(dataclasses.replace(estimate([np.nan, 0.012, 1.234]), covariance=cov), "A", 10.1, 10.05)
+    assert depth.state == ConeState.NO_DATA  # no concentricity without Δx
+    assert "Measured: Δy +12 ±14 · Δz +1234 ±52 mm (2σ)" in cone_markdown(depth)
+    assert viewer_safe(cone_markdown(depth))
+    assert cones_line([depth]) == "A NO DATA (σ too large; Δy +12 ±14 · Δz +1234 ±52 mm (2σ))"  # `live`'s log
+    height = cone_reading(dataclasses.replace(estimate([0.03, 0.04, np.nan]), covariance=np.diag([0.005, 0.005, 0.06])
+                                              ** 2), "A", 10.1, 10.05)
+    assert height.state == ConeState.GREEN and height.concentricity == pytest.approx(0.05)
+    assert "Δz — mm" in cone_markdown(height) and viewer_safe(cone_markdown(height))
 
 
 def test_a_window_of_the_segments(live_run: Path, tmp_path: Path) -> None:

@@ -147,6 +147,7 @@ def test_cone_state_never_claims_an_unknown_cone() -> None:
     assert cone_state(np.array([0.01, -0.2, 0.1])) == "outside"
     assert cone_state(np.array([0.12, -0.12, 0.0])) == "outside"  # 0.17 m from the target, though each axis fits
     assert cone_state(np.array([0.01, -0.02, 2.0])) == "within ±0.15 m"  # 2 m above: concentric, not yet down
+    assert cone_state(np.array([0.01, -0.02, np.nan])) == "within ±0.15 m"  # its height withheld alone
 
 
 def test_fused_recording_logs_uncertainty(installation: Path, tmp_path: Path) -> None:

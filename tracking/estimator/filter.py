@@ -263,8 +263,9 @@ class TopsideFilter(FilterState):
         its cameras' disagreement (floors: (C, 3) variances and (C,) cones whose cameras are not yet compared,
         default: the current ones, tracking.estimator.disagreement), withholding cones whose σ exceeds
         REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_SIDES of a marker side while warming (default: whether the filter
-        is now), or whose cameras are not yet compared; from the current state, with the placed cameras' poses (a past
-        state's are relative to nominals since moved). A past state without its floors gets none."""
+        is now; after the warm-up, at a cone with marker pairs, only its axes beyond the limit), or whose cameras are
+        not yet compared; from the current state, with the placed cameras' poses (a past state's are relative to
+        nominals since moved). A past state without its floors gets none."""
         poses = None if x is not None else CameraPoses(
             {name: (cam.T_jacket_camera, cam.index) for name, cam in self.cameras.items()
              if cam.T_jacket_camera is not None}, self.x[:self.body_size].copy())
@@ -295,7 +296,11 @@ class TopsideFilter(FilterState):
         mismatch = self.scale.mismatch  # every offset scaled: once a time, not once a cone
         for k, (cone, offset, cov, sd, timed_sd) in enumerate(zip(names, offsets, covs, sds, timed_sds, strict=True)):
             withheld = self._withheld(float(offset[2]), sd, timed_sd, limit, mismatch, bool(pending[k]))
-            offset = np.full(3, np.nan) if withheld else offset
+            if withheld in (WITHHELD_SIGMA, WITHHELD_CLOCKS) and cone in self.paired and not warming:  # its axes
+                offset = np.where(np.array(sd) > limit, np.nan, offset)  # within the limit stay: one camera sees
+                # height, not depth. Not at a cone without a pair (its axes all lean on the topside's turn over tens
+            elif withheld:  # of metres, where an error no σ holds grows), nor in the warm-up (its poses are not
+                offset = np.full(3, np.nan)  # Gaussian): there, whole (docs/accuracy.md)
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))
         return out
 

@@ -200,6 +200,7 @@ class FilterState:
     topside_corners: dict[int, np.ndarray] = field(init=False)  # marker id -> its corners (4, 3), topside frame
     centres: dict[int, np.ndarray] = field(init=False)  # marker id -> its centre (3,), its body's frame
     cones: dict[str, np.ndarray] = field(init=False)  # cone -> the point (3,) whose offset is the cone's
+    paired: frozenset[str] = field(init=False)  # the cones with marker pairs (the others' offsets: through the topside)
     cone_rows: tuple[list[str], np.ndarray] = field(init=False)  # the cones in name order and their offsets' (C, 3,
     # 12) point_offset_matrix
     clock_sigma: dict[str, float] = field(init=False)  # camera -> its clock's σ, s (rig: time_offset_sigma)
@@ -225,6 +226,7 @@ class FilterState:
                                 for i, T in geometry.topside.items()}
         self.centres = {m.id: np.array(m.center, dtype=float) for m in self.rig.markers}
         self.cones = cone_points(self.rig)
+        self.paired = frozenset(p.cone for p in self.rig.all_pairs())
         names = sorted(self.cones)
         self.cone_rows = (names, np.array([point_offset_matrix(self.cones[c]) for c in names]).reshape(-1, 3, STATE))
         self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}
