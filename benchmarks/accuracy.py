@@ -226,7 +226,7 @@ def run(name: str, fps: float, weather: dict | None = None, refinement: Refineme
     cost.setdefault("render_s", t1 - t0)
     cost.setdefault("track_s", t2 - t1)
     cost_file.write_text(json.dumps(cost))
-    monitored = sorted({p.cone for p in rig.all_pairs()})
+    monitored = rig.paired_cones()
     truth = pd.read_csv(scene / "truth.csv")
     out = {"name": name, "truth": truth, "monitored": monitored, "cones": sorted(set(rig.cones) | set(monitored)),
            "mbps": bit_rate(rig, truth["time"].max()), **cost}

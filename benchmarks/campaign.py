@@ -288,7 +288,8 @@ def installation_rows(r: dict) -> list[str]:
     for cone, modes in r["cones"].items():
         f, s = modes["fused"], modes["smoothed"]
         first = f"{f.first_s:.1f}" if np.isfinite(f.first_s) else "never"
-        axes = f" ({axes_text(f)})" if axes_text(f) else ""
+        axes = axes_text(f)
+        axes = f" ({axes})" if axes else ""
         lines.append(f"| {r['seed']} | {cone} | {f.cell_px:.1f} | {f.shown:.0%}{axes} | {first} | {_mm(f.mae)} | "
                      f"{_mm(f.emax)} | {f.within:.0%} / {f.beyond:.1%} | {s.within:.0%} / {s.beyond:.1%} | "
                      f"{'/'.join(f'{v:.2f}' for v in f.rms_z)} | {cams} |")

@@ -185,7 +185,7 @@ def main() -> None:
         detections = pickle.loads(cache.read_bytes())
         measurements = measure(rig, detections)
         truth = pd.read_csv(scene / "truth.csv")
-        monitored = sorted({p.cone for p in rig.all_pairs()})
+        monitored = rig.paired_cones()
         fused = errors(TopsideFilter(rig), measurements, truth, monitored)
         oracle = TrueCameras(rig)
         oracle.truth = truth

@@ -78,7 +78,7 @@ def fused_row(job: tuple[str, str]) -> str:
     scene, found = detections(name, CHANGES[label])
     rig = with_mounts(load_rig(scene / "rig.yaml"), name)
     truth = pd.read_csv(scene / "truth.csv")
-    df = errors(TopsideFilter(rig), measure(rig, found), truth, sorted({p.cone for p in rig.all_pairs()}))
+    df = errors(TopsideFilter(rig), measure(rig, found), truth, rig.paired_cones())
     e = df[["ex", "ey", "ez"]].abs() * 1e3
     mbps = float(np.mean(bit_rate(rig, truth["time"].max())))
     return (f"| {name} | {label} | {mbps:.1f} | " + " / ".join(f"{v:.0f}" for v in e.max()) + " | "

@@ -127,7 +127,7 @@ def run(name: str, survey_seconds: float) -> dict:
     truth = pd.read_csv(scene / "truth.csv")
     duration = float(truth["time"].max())
     camera_minutes = len(given.cameras) * duration / 60
-    monitored = sorted({p.cone for p in given.all_pairs()})
+    monitored = given.paired_cones()
     rigs: dict[str, Rig] = {"nominal": given}
     timings: dict[str, float] = {}
 

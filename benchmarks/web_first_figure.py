@@ -79,7 +79,7 @@ def cones_of(rig: Path) -> list[str]:
     from tracking.rig import load_rig
 
     r = load_rig(rig)
-    return sorted(r.cones) or sorted({p.cone for p in r.all_pairs()})
+    return r.all_cones()
 
 
 def layout_ready(cones: list[str]) -> Callable[[ViewerState], bool]:

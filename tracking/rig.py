@@ -399,9 +399,13 @@ class Rig(_Model):
         """Markers keyed by id."""
         return {m.id: m for m in self.markers}
 
+    def paired_cones(self) -> list[str]:
+        """The cones with marker pairs, sorted (the others' offsets come through the rigid topside)."""
+        return sorted({p.cone for p in self.all_pairs()})
+
     def all_cones(self) -> list[str]:
         """Every cone, sorted: its pairs' cones and the cones whose tips are surveyed (a cone without markers)."""
-        return sorted({p.cone for p in self.all_pairs()} | set(self.cones))
+        return sorted({*self.paired_cones(), *self.cones})
 
     def all_pairs(self) -> list[Pair]:
         """The listed pairs, or, if none are listed, every jacket/topside marker on the same cone and face."""
@@ -462,7 +466,7 @@ def rig_warnings(path: Path, rig: Rig) -> tuple[str, ...]:
     out = [f"{path}: cameras[{i}].mount: not given; {cam.name} is treated as a {DEFAULT_MOUNT} (the loosest motion "
            "prior: a still camera reads worse; give fixed or vessel)"
            for i, cam in enumerate(rig.cameras) if "mount" not in cam.model_fields_set]
-    paired = sorted({pair.cone for pair in rig.all_pairs()})
+    paired = rig.paired_cones()
     tipless = [cone for cone in paired if cone not in rig.cones]
     if tipless and not rig.cones:
         out.append(f"{path}: cones: not given; each cone's offset is reported at its topside marker's centre, "

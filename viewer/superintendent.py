@@ -248,7 +248,7 @@ def no_camera_text(cone: str, marked: bool) -> str:
 
 def marked_cones(rig: Rig) -> set[str]:
     """The cones with marker pairs in the rig."""
-    return {p.cone for p in rig.all_pairs()}
+    return set(rig.paired_cones())
 
 
 def log_target_circle(rec: rr.RecordingStream, cone: str, marked: bool = True) -> None:

@@ -15,7 +15,8 @@ import pytest
 import yaml
 
 from tests.synthetic import simulated_once
-from tracking.check import CameraRun, CheckReport, camera_clock, check_runs, run_cameras
+from tracking.check import CameraRun, CheckReport, MarkerSight, camera_clock, check_runs, cone_checks, run_cameras
+from tracking.estimate import ConeEstimate
 from tracking.images import VideoHealth
 from tracking.pipeline import CameraTracker
 from tracking.rig import load_rig
@@ -112,9 +113,22 @@ def test_cones_without_markers_are_weak_and_a_far_one_blind(clip: Path, runs: di
                                                            "E": "blind"}
     assert verdicts["E"].sigma_m.max() > 0.05
     assert verdicts["E"].reason.startswith("no marker at E: from the topside's rigid pose")
-    assert "above the 50 mm report limit: it would show NO DATA" in verdicts["E"].reason
+    assert verdicts["E"].reason.endswith("above the 50 mm report limit: it would show NO DATA")  # whole: no pair
     assert "cone E: blind: no marker at E" in "\n".join(report.problems())
     assert not report.disagreements and not report.ready
+
+
+def test_a_cone_shown_on_some_axes_says_which_are_withheld(clip: Path) -> None:
+    """A cone one camera sees square on, its depth's σ above the limit: the filter withheld Δx alone, and the verdict
+    names it (an estimate withheld whole says NO DATA alone, as above)."""
+    rig = load_rig(clip / "rig.yaml")
+    cone = rig.paired_cones()[0]
+    topside = next(m.id for m in rig.markers if m.cone == cone and m.body == "topside")
+    sight = MarkerSight("stern_A", topside, 70, 1.0, 34.0, 5.0, 6.0, 0.1)
+    e = ConeEstimate(10.0, cone, np.array([np.nan, 0.01, 0.2]), ("stern_A",), np.diag([0.06, 0.005, 0.005]) ** 2,
+                     withheld="σ too large")
+    [verdict] = [c for c in cone_checks(rig, [e], [sight]) if c.cone == cone]
+    assert verdict.verdict == "weak" and "it would show NO DATA on Δx (its other axes alone)" in verdict.reason
 
 
 # --- planted faults -----------------------------------------------------------------------------------------------

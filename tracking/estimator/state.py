@@ -226,7 +226,7 @@ class FilterState:
                                 for i, T in geometry.topside.items()}
         self.centres = {m.id: np.array(m.center, dtype=float) for m in self.rig.markers}
         self.cones = cone_points(self.rig)
-        self.paired = frozenset(p.cone for p in self.rig.all_pairs())
+        self.paired = frozenset(self.rig.paired_cones())
         names = sorted(self.cones)
         self.cone_rows = (names, np.array([point_offset_matrix(self.cones[c]) for c in names]).reshape(-1, 3, STATE))
         self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}

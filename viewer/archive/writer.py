@@ -125,7 +125,7 @@ class Archive:
             "software_version": inputs.software_version, "software_commit": inputs.software_commit,
             "configuration_sha256": inputs.config_hash(), "rig_file": inputs.rig_name,
             "cameras": " ".join(c.name for c in rig.cameras),
-            "cones": " ".join(sorted({p.cone for p in rig.all_pairs()})),
+            "cones": " ".join(rig.paired_cones()),
             "options": json.dumps(inputs.options, sort_keys=True), "archive_format": "topside-mcap/1",
             "frames": "foxglove.CompressedVideo h264" if video == "h264" else "foxglove.CompressedImage jpeg"})
         self.file.attach(inputs.rig_name, "application/yaml", inputs.rig_text)
