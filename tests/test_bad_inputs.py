@@ -1,5 +1,6 @@
-"""Every command with bad input, through the real CLI in a subprocess: exit 2, one line on stderr naming the file or
-option, no traceback, every input byte-identical afterwards, and no output (temporary or not) left behind."""
+"""Every command with bad input, through the real CLI's entry point (in this process; a case of each kind in a
+subprocess too): exit 2, one line on stderr naming the file or option, no traceback, every input byte-identical
+afterwards, and no output (temporary or not) left behind."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ import numpy as np
 import pytest
 import yaml
 
+from tests.cli_runs import run_topside
 from tests.conftest import FPS, FRAMES, T0, motion
 from tests.streams import mpegts_copy, serving
 from tracking.cli.common import PROGRESS_INTERVAL_ENV
@@ -371,21 +373,46 @@ def test_at_least_forty_cases_cover_every_command() -> None:
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, id=c.name, marks=c.marks) for c in CASES])
-def test_bad_input(case: Case, installation: Path, tmp_path: Path) -> None:
+def test_bad_input(case: Case, installation: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str],
+                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """Run in this process (the same entry point, without an interpreter's start-up per case)."""
+    folder = tmp_path / "work"
+    shutil.copytree(installation, folder)
+    if case.prepare is not None:
+        case.prepare(folder)
+    before = snapshot(folder)
+    code, out, err = run_topside(case.args, folder, capfd, monkeypatch)
+    assert_one_line_error(case, code, out, err)
+    assert snapshot(folder) == before  # inputs unchanged, nothing written, nothing half-written
+
+
+SUBPROCESS_CASES = ("track -o the rig", "report a truncated recording", "export --offsets binary",
+                    "verify --key a private key", "view --from nan")
+
+
+@pytest.mark.parametrize("name", SUBPROCESS_CASES)
+def test_bad_input_in_its_own_process(name: str, installation: Path, tmp_path: Path) -> None:
+    """A case of each kind through a real `topside` process: the exit status and stderr the shell sees."""
+    case = next(c for c in CASES if c.name == name)
     folder = tmp_path / "work"
     shutil.copytree(installation, folder)
     if case.prepare is not None:
         case.prepare(folder)
     before = snapshot(folder)
     proc = subprocess.run([*TOPSIDE, *case.args], cwd=folder, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 2, proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1, proc.stderr
+    assert_one_line_error(case, proc.returncode, proc.stdout, proc.stderr)
+    assert snapshot(folder) == before
+
+
+def assert_one_line_error(case: Case, code: int, out: str, err: str) -> None:
+    """Exit 2 and one line on stderr, `topside: error: ` and the fragments the case names."""
+    assert code == 2, out + err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
     assert lines[0].startswith("topside: error: ")
     for fragment in case.names:
         assert fragment in lines[0], lines[0]
-    assert snapshot(folder) == before  # inputs unchanged, nothing written, nothing half-written
 
 
 @pytest.mark.parametrize(("pairs", "does"), [(True, "marker 4 is tracked for cone A, as pairs says"),

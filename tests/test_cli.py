@@ -12,13 +12,16 @@ import pandas as pd
 import pytest
 import yaml
 
+from tests.cli_runs import Run, topside_runner
 from tests.conftest import FPS, FRAMES, T0, motion
 
 TOPSIDE = [sys.executable, "-m", "tracking.cli"]
 
 
-def run(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([*TOPSIDE, *map(str, args)], capture_output=True, text=True, timeout=120)
+@pytest.fixture
+def run(capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> Run:
+    """`run(*args)`: the command in this test's process (the sigterm test runs a real one)."""
+    return topside_runner(capfd, monkeypatch)
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) -> None:
@@ -30,7 +33,7 @@ def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) ->
         assert fragment in lines[0]
 
 
-def test_track_raw(installation: Path, tmp_path: Path) -> None:
+def test_track_raw(run: Run, installation: Path, tmp_path: Path) -> None:
     out = tmp_path / "offsets.csv"
     proc = run("track", "--rig", installation / "rig.yaml", "--mode", "raw", "-o", out)
     assert proc.returncode == 0, proc.stderr
@@ -49,7 +52,7 @@ def test_track_raw(installation: Path, tmp_path: Path) -> None:
     assert "cam-ahead" in proc.stdout and "wrote 24 rows" in proc.stdout
 
 
-def test_track_paper_mode(installation: Path, tmp_path: Path) -> None:
+def test_track_paper_mode(run: Run, installation: Path, tmp_path: Path) -> None:
     out = tmp_path / "paper.csv"
     proc = run("track", "--rig", installation / "rig.yaml", "--mode", "paper", "-o", out)
     assert proc.returncode == 0, proc.stderr
@@ -65,7 +68,7 @@ def test_track_paper_mode(installation: Path, tmp_path: Path) -> None:
     assert np.isnan(df.iloc[0]["dy"])  # the first row has only the first camera's axes
 
 
-def test_track_fused_is_the_default(installation: Path, tmp_path: Path) -> None:
+def test_track_fused_is_the_default(run: Run, installation: Path, tmp_path: Path) -> None:
     out = tmp_path / "fused.csv"
     proc = run("track", "--rig", installation / "rig.yaml", "-o", out)
     assert proc.returncode == 0, proc.stderr
@@ -83,7 +86,7 @@ def test_track_fused_is_the_default(installation: Path, tmp_path: Path) -> None:
     assert "never shown" not in proc.stderr
 
 
-def test_evaluate(installation: Path, tmp_path: Path) -> None:
+def test_evaluate(run: Run, installation: Path, tmp_path: Path) -> None:
     out = tmp_path / "offsets.csv"
     assert run("track", "--rig", installation / "rig.yaml", "--mode", "raw", "-o", out).returncode == 0
     proc = run("evaluate", out, installation / "truth.csv", "--markdown", tmp_path / "acc.md")
@@ -95,7 +98,7 @@ def test_evaluate(installation: Path, tmp_path: Path) -> None:
     assert "| 24 |" in rows["x"]
 
 
-def test_detect_json_with_poses(installation: Path, tmp_path: Path) -> None:
+def test_detect_json_with_poses(run: Run, installation: Path, tmp_path: Path) -> None:
     proc = run("detect", installation / "cam-ahead.mp4", "--rig", installation / "rig.yaml",
                "--camera", installation / "calibration/cam-ahead.yaml", "--json")
     assert proc.returncode == 0, proc.stderr
@@ -106,7 +109,7 @@ def test_detect_json_with_poses(installation: Path, tmp_path: Path) -> None:
     assert 19 < np.linalg.norm(rows[0]["markers"][0]["pose"]["tvec"]) < 22  # camera 20.2 m from marker 1
 
 
-def test_unknown_ids_in_video_counted(installation: Path, tmp_path: Path) -> None:
+def test_unknown_ids_in_video_counted(run: Run, installation: Path, tmp_path: Path) -> None:
     rig = yaml.safe_load((installation / "rig.yaml").read_text())
     rig["markers"] = [m for m in rig["markers"] if m["id"] != 2]
     rig["pairs"] = [p for p in rig["pairs"] if p["topside"] != 2]
@@ -119,7 +122,7 @@ def test_unknown_ids_in_video_counted(installation: Path, tmp_path: Path) -> Non
     assert f"id 2: {FRAMES}" in proc.stdout
 
 
-def test_calibrate_cli(shared_data: Path, tmp_path: Path) -> None:
+def test_calibrate_cli(run: Run, shared_data: Path, tmp_path: Path) -> None:
     photos = sorted((shared_data / "calibration/opencv-left").glob("left*.jpg"))
     proc = run("calibrate", *photos, "--board", "chessboard:9x6:0.025", "-o", tmp_path / "cam.yaml")
     assert proc.returncode == 0, proc.stderr
@@ -130,7 +133,7 @@ def test_calibrate_cli(shared_data: Path, tmp_path: Path) -> None:
     assert load_camera(tmp_path / "cam.yaml").K[0, 0] == pytest.approx(532.8, abs=1)
 
 
-def test_calibrate_warns_partial_coverage(shared_data: Path, tmp_path: Path) -> None:
+def test_calibrate_warns_partial_coverage(run: Run, shared_data: Path, tmp_path: Path) -> None:
     photos = sorted((shared_data / "aruco/opencv-tutorial").glob("img_0*.jpg"))
     proc = run("calibrate", *photos, "--board", "charuco:5x7:0.04:0.02:DICT_6X6_250", "-o", tmp_path / "c.yaml")
     assert proc.returncode == 0, proc.stderr
@@ -139,24 +142,24 @@ def test_calibrate_warns_partial_coverage(shared_data: Path, tmp_path: Path) -> 
 
 # --- bad input: one line naming the file and field, exit status 2 ---------------------------------------
 
-def test_unreadable_image(tmp_path: Path) -> None:
+def test_unreadable_image(run: Run, tmp_path: Path) -> None:
     bad = tmp_path / "broken.png"
     bad.write_bytes(b"not an image")
     assert_one_line_error(run("detect", bad), str(bad), "cannot be read as an image")
 
 
-def test_unreadable_video(tmp_path: Path) -> None:
+def test_unreadable_video(run: Run, tmp_path: Path) -> None:
     bad = tmp_path / "broken.mp4"
     bad.write_bytes(b"\x00" * 1000)
     assert_one_line_error(run("detect", bad), str(bad), "cannot be opened as a video")
 
 
-def test_unknown_dictionary(installation: Path) -> None:
+def test_unknown_dictionary(run: Run, installation: Path) -> None:
     assert_one_line_error(run("detect", installation / "cam-ahead.mp4", "--dictionary", "DICT_7X7_9"),
                           "--dictionary", "unknown ArUco dictionary 'DICT_7X7_9'")
 
 
-def test_rig_with_duplicate_id(installation: Path, tmp_path: Path) -> None:
+def test_rig_with_duplicate_id(run: Run, installation: Path, tmp_path: Path) -> None:
     rig = yaml.safe_load((installation / "rig.yaml").read_text())
     rig["markers"][1]["id"] = rig["markers"][0]["id"]
     (tmp_path / "rig.yaml").write_text(yaml.safe_dump(rig))
@@ -164,7 +167,7 @@ def test_rig_with_duplicate_id(installation: Path, tmp_path: Path) -> None:
                           "duplicate marker id 1")
 
 
-def test_calibration_missing_field(installation: Path, tmp_path: Path) -> None:
+def test_calibration_missing_field(run: Run, installation: Path, tmp_path: Path) -> None:
     text = (installation / "calibration/cam-ahead.yaml").read_text()
     cam = tmp_path / "cam.yaml"
     cam.write_text("\n".join(line for line in text.splitlines() if not line.startswith("image_height")))
@@ -172,13 +175,13 @@ def test_calibration_missing_field(installation: Path, tmp_path: Path) -> None:
                           str(cam), "image_height: missing")
 
 
-def test_marker_not_in_rig_in_an_image(installation: Path, tmp_path: Path, shared_data: Path) -> None:
+def test_marker_not_in_rig_in_an_image(run: Run, installation: Path, tmp_path: Path, shared_data: Path) -> None:
     photo = shared_data / "aruco/opencv-tutorial/singlemarkersoriginal.jpg"
     assert_one_line_error(run("detect", photo, "--rig", installation / "rig.yaml"),
                           str(photo), "marker id 23 is not in the rig")
 
 
-def test_missing_rig_file(tmp_path: Path) -> None:
+def test_missing_rig_file(run: Run, tmp_path: Path) -> None:
     assert_one_line_error(run("track", "--rig", tmp_path / "nope.yaml"), "nope.yaml", "rig file not found")
 
 
@@ -210,7 +213,7 @@ def test_live_stopped_by_sigterm_keeps_every_row_under_its_name(installation: Pa
     assert all((tmp_path / f).is_file() for f in index["file"])
 
 
-def test_live_never_overwrites_an_earlier_session(installation: Path, tmp_path: Path) -> None:
+def test_live_never_overwrites_an_earlier_session(run: Run, installation: Path, tmp_path: Path) -> None:
     (tmp_path / "live-000.rrd").write_bytes(b"an earlier session")
     proc = run("live", "--rig", installation / "rig.yaml", "--rrd", tmp_path / "live.rrd", "-o", tmp_path / "n.csv",
                "--speed", "inf")
@@ -219,7 +222,7 @@ def test_live_never_overwrites_an_earlier_session(installation: Path, tmp_path: 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["live-000.rrd"]
 
 
-def test_simulate_replaces_its_own_earlier_folder(tmp_path: Path) -> None:
+def test_simulate_replaces_its_own_earlier_folder(run: Run, tmp_path: Path) -> None:
     out = tmp_path / "sim"
     for seed in ("1", "2"):
         proc = run("simulate", "config1-procedure1-clear", "-o", out, "--duration", "0.2", "--seed", seed)
@@ -228,7 +231,7 @@ def test_simulate_replaces_its_own_earlier_folder(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sim"]  # no temporary folder left
 
 
-def test_recover_an_intact_archive_writes_nothing(installation: Path, tmp_path: Path) -> None:
+def test_recover_an_intact_archive_writes_nothing(run: Run, installation: Path, tmp_path: Path) -> None:
     archive = tmp_path / "run.mcap"
     proc = run("track", "--rig", installation / "rig.yaml", "-o", tmp_path / "o.csv", "--mcap", archive)
     assert proc.returncode == 0, proc.stderr
@@ -253,7 +256,7 @@ def changed_rig(installation: Path, folder: Path, **changes) -> Path:
     return folder / "rig.yaml"
 
 
-def test_track_names_a_wrong_marker_size(installation: Path, tmp_path: Path) -> None:
+def test_track_names_a_wrong_marker_size(run: Run, installation: Path, tmp_path: Path) -> None:
     """The plate's side (1.5 m) entered for the 1 m black square, with one camera's position surveyed: track names the
     marker size in one line, exits 2, and keeps the offsets it wrote with none shown. Without the survey nothing fixes
     the scale, and it says so."""
@@ -270,7 +273,7 @@ def test_track_names_a_wrong_marker_size(installation: Path, tmp_path: Path) -> 
     assert plain.returncode == 0 and "nothing fixes the scale" in plain.stderr
 
 
-def test_track_refuses_the_topside_through_its_cones(installation: Path, tmp_path: Path) -> None:
+def test_track_refuses_the_topside_through_its_cones(run: Run, installation: Path, tmp_path: Path) -> None:
     """A marker size half the real one puts the topside about 0.9 m below its cone: those offsets are withheld as a rig
     error, named in one line, exit 2."""
     rig = changed_rig(installation, tmp_path, marker_size=0.5)
