@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import fcntl
 import os
+import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -214,16 +216,25 @@ def render_installation(folder, motion, times: dict[str, np.ndarray], dist: np.n
     (folder / "truth.csv").write_text("\n".join(lines) + "\n")
 
 
-def simulated_once(tmp_path_factory: pytest.TempPathFactory, scenario: str, duration: float) -> Path:
-    """A simulated clip, rendered once per test run even when xdist's workers share it: under a lock in the run's
-    common temporary folder."""
-    from tracking.sim.command import run_simulate
-
+def made_once(tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[Path], None]) -> Path:
+    """A folder `make` fills, made once per test run even when xdist's workers share it: under a lock in the run's
+    common temporary folder, made under a temporary name and renamed when whole."""
     base = tmp_path_factory.getbasetemp()
     shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    folder = shared / f"sim-{scenario}-{duration:g}s"
-    with open(shared / f"sim-{scenario}-{duration:g}s.lock", "w") as lock:
+    folder = shared / name
+    with open(shared / f"{name}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (folder / "scenario.yaml").is_file():
-            run_simulate(scenario, folder, duration=duration, quiet=True)
+        if not folder.is_dir():
+            partial = shared / f"{name}.partial"
+            shutil.rmtree(partial, ignore_errors=True)
+            make(partial)
+            partial.rename(folder)
     return folder
+
+
+def simulated_once(tmp_path_factory: pytest.TempPathFactory, scenario: str, duration: float) -> Path:
+    """A simulated clip, rendered once per test run (made_once)."""
+    from tracking.sim.command import run_simulate
+
+    return made_once(tmp_path_factory, f"sim-{scenario}-{duration:g}s",
+                     lambda folder: run_simulate(scenario, folder, duration=duration, quiet=True))

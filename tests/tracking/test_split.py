@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tests.tracking.test_fusion import camera_rig, observations
-from tests.tracking.test_parallel import TOPSIDE, canon, clip, mcap_content, rrd_rows, track  # noqa: F401
+from tests.tracking.test_parallel import TOPSIDE, canon, clip, mcap_content, one_worker, rrd_rows, track  # noqa: F401
 from tracking.estimator import ESTIMATORS, FilterReport
 from tracking.parallel import InPlace, LocalPool
 from tracking.rig import Rig, load_rig, save_rig
@@ -84,22 +84,24 @@ def test_segments_fused_by_workers_are_fused_in_place(run: tuple[Rig, list]) -> 
         canon([dataclasses.replace(e, T_jacket_cameras=None) for e in in_place])
 
 
-def test_track_splits_a_long_run_and_one_pass_fusion_keeps_one_pass(clip: Path, tmp_path: Path) -> None:  # noqa: F811
+def test_track_splits_a_long_run_and_one_pass_fusion_keeps_one_pass(clip: Path, one_worker: Path,  # noqa: F811
+                                                                   tmp_path: Path) -> None:
     """Segments of 1 s of the 2.5 s clip, each read from its default lead-in (20 s) before it: from the run's start,
     so the same outputs as one pass, recording and archive included (the recording's values at their capture times:
     an estimate now comes after more frames than in one pass, and is logged beside their frame numbers; the status
     panel, logged with the estimates, counts the frames seen by then; the archive's messages are written in another
     order)."""
-    split = track(clip, tmp_path, "split", "--workers", "2", "--fusion-segment", "1")
-    one = track(clip, tmp_path, "one", "--workers", "2", "--fusion-segment", "1", "--one-pass-fusion")
-    assert split.returncode == 0 and one.returncode == 0, split.stderr + one.stderr
-    assert "fused in 3 segments of 1 s" in split.stdout and "segments" not in one.stdout
-    csv = (tmp_path / "one.csv").read_bytes()
+    split = track(clip, tmp_path, "split", "--workers", "2", "--fusion-segment", "1")  # the one pass: one_worker's
+    assert split.returncode == 0, split.stderr
+    assert "fused in 3 segments of 1 s" in split.stdout and "segments" not in (one_worker / "one.txt").read_text()
+    csv = (one_worker / "one.csv").read_bytes()
     assert csv.count(b"\n") > 100 and (tmp_path / "split.csv").read_bytes() == csv
-    rrd, split_rrd = (Counter({k: n for k, n in rrd_rows(tmp_path / f"{name}.rrd", frame_timelines=False).items()
-                               if not k.startswith("('/status'")}) for name in ("one", "split"))
+    rrd, split_rrd = (Counter({k: n for k, n in rrd_rows(path, frame_timelines=False).items()
+                               if not k.startswith("('/status'")})
+                      for path in (one_worker / "one.rrd", tmp_path / "split.rrd"))
     assert sum(rrd.values()) > 1000 and split_rrd == rrd
-    (messages, meta), (split_messages, split_meta) = (mcap_content(tmp_path / f"{n}.mcap") for n in ("one", "split"))
+    (messages, meta), (split_messages, split_meta) = (mcap_content(p) for p in (one_worker / "one.mcap",
+                                                                                 tmp_path / "split.mcap"))
     assert split_messages == messages and split_meta.pop("topside.checkpoint") != meta.pop("topside.checkpoint")
     assert split_meta == meta  # the checkpoint's hash chains the messages in the order written
     verified = subprocess.run([*TOPSIDE, "verify", str(tmp_path / "split.mcap")], capture_output=True, text=True,
