@@ -52,7 +52,7 @@ from tracking.disagreements import (
     tilt_disagreements,
 )
 from tracking.errors import InputError
-from tracking.estimate import AXIS_NAMES, WITHHELD_BELOW, ConeEstimate
+from tracking.estimate import WITHHELD_BELOW, ConeEstimate, axes_withheld
 from tracking.estimator import TopsideFilter, cone_points, filter_frame, point_offset_matrix
 from tracking.estimator.noise import MOUNT_MISMATCH, REPORT_MAX_SIGMA_M, STATE
 from tracking.estimator.state import topside_pose
@@ -385,9 +385,8 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
             reason = f"{source}; the filter gave no estimate in these seconds: it would show NO DATA{depth}"
         elif worst > REPORT_MAX_SIGMA_M:
             verdict = "weak" if has_markers and cameras else "blind"
-            shown = np.isfinite(e.offset) if e is not None else np.zeros(3, dtype=bool)  # as the filter gave it
-            withheld = " and ".join(a for a, s in zip(AXIS_NAMES, shown, strict=True) if not s)
-            partly = f" on {withheld} (its other axes alone)" if shown.any() else ""
+            partly = (f" on {axes_withheld(e.offset)} (its other axes alone)"  # as the filter gave it
+                      if e is not None and np.isfinite(e.offset).any() else "")
             reason = (f"{source}; {mm} is above the {REPORT_MAX_SIGMA_M * 1000:.0f} mm report limit: it would show "
                       f"NO DATA{partly}{depth}")
         elif worst > READY_MAX_SIGMA_M:

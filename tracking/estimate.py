@@ -46,6 +46,11 @@ def sigma_text(sigma: np.ndarray) -> str:
     return " · ".join(f"{a} {s * 1000:.0f}" for a, s in zip(AXIS_NAMES, sigma, strict=True)) + " mm"
 
 
+def axes_withheld(offset: np.ndarray) -> str:
+    """The axes an offset (3,) withholds (NaN), e.g. 'Δz' or 'Δx and Δy'; empty if none."""
+    return " and ".join(a for a, v in zip(AXIS_NAMES, offset, strict=True) if not np.isfinite(v))
+
+
 def axes_above(sigma: np.ndarray, limit: float) -> str:
     """The axes whose σ (3,) m exceeds limit (not those that state none), e.g. 'Δy' or 'Δx and Δz'; empty if none."""
     return " and ".join(a for a, s in zip(AXIS_NAMES, sigma, strict=True) if limit < s < np.inf)

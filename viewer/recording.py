@@ -26,7 +26,7 @@ import pandas as pd
 import rerun as rr
 
 from tracking.camera import CameraModel
-from tracking.estimate import TOLERANCE_M, ConeEstimate
+from tracking.estimate import AXIS_NAMES, TOLERANCE_M, ConeEstimate, axes_withheld
 from tracking.estimator import point_offset_matrix
 from tracking.geometry import quaternions_xyzw, rotation, transform
 from tracking.images import Frame, VideoHealth
@@ -449,6 +449,17 @@ def cone_state(offset: np.ndarray) -> str:
     return f"within ±{TOLERANCE_M} m" if concentricity(offset) <= TOLERANCE_M else "outside"
 
 
+def said_state(estimate: ConeEstimate) -> str:
+    """A cone's state and why what it lacks is withheld: 'within ±0.15 m (Δz withheld: σ too large)', 'NO DATA (σ too
+    large)' when every axis is."""
+    state = cone_state(estimate.offset)
+    if not estimate.withheld:
+        return state
+    axes = axes_withheld(estimate.offset)
+    partly = axes and axes != " and ".join(AXIS_NAMES)
+    return f"{state} ({axes} withheld: {estimate.withheld})" if partly else f"{state} ({estimate.withheld})"
+
+
 @dataclass
 class StatusBoard:
     """The status panel's state: last estimate per cone, counts per camera; logged as markdown."""
@@ -463,7 +474,7 @@ class StatusBoard:
         lines = ["## Cones", "", "| cone | dx [m] | dy [m] | dz [m] | state | cameras |",
                  "|---|---:|---:|---:|---|---|"]
         for cone, e in sorted(self.latest.items()):
-            state = f"{cone_state(e.offset)} ({e.withheld})" if e.withheld else cone_state(e.offset)
+            state = said_state(e)
             vals = " | ".join("—" if not np.isfinite(v) else f"{v:+.3f}" for v in e.offset)
             lines.append(f"| {cone} | {vals} | {state} | {', '.join(e.cameras)} |")
         lines += ["", "## Cameras", "", "| camera | frames | markers |", "|---|---:|---:|"]

@@ -150,6 +150,19 @@ def test_cone_state_never_claims_an_unknown_cone() -> None:
     assert cone_state(np.array([0.01, -0.02, np.nan])) == "within ±0.15 m"  # its height withheld alone
 
 
+def test_a_cone_state_names_the_axes_it_withholds_and_why() -> None:
+    from tracking.estimate import WITHHELD_SIGMA, ConeEstimate
+    from viewer.recording import said_state
+
+    def said(offset: list[float], withheld: str = WITHHELD_SIGMA) -> str:
+        return said_state(ConeEstimate(1.0, "A", np.array(offset), ("cam",), withheld=withheld))
+
+    assert said([0.01, -0.02, np.nan]) == f"within ±0.15 m (Δz withheld: {WITHHELD_SIGMA})"
+    assert said([np.nan, -0.02, 0.3]) == f"NO DATA (Δx withheld: {WITHHELD_SIGMA})"
+    assert said([np.nan] * 3) == f"NO DATA ({WITHHELD_SIGMA})"
+    assert said([0.01, -0.02, 0.3], "") == "within ±0.15 m"
+
+
 def test_fused_recording_logs_uncertainty(installation: Path, tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-m", "tracking.cli", "track", "--rig", str(installation / "rig.yaml"),
                            "-o", str(tmp_path / "o.csv"), "--rrd", str(tmp_path / "f.rrd")],

@@ -41,6 +41,7 @@ from viewer.archive.messages import (
 from viewer.recording import (
     JPEG_QUALITY,
     cone_state,
+    said_state,
     topside_pose,
 )
 
@@ -216,7 +217,7 @@ class Archive:
             dz=estimate.offset[2], sdx=sd[0], sdy=sd[1], sdz=sd[2],
             covariance=np.asarray(cov).reshape(-1).tolist() if cov is not None else [], status=state,
             cameras=list(estimate.cameras)), ns)
-        said = f"{state} ({estimate.withheld})" if estimate.withheld else state  # why it is withheld, when known
+        said = said_state(estimate)  # the state and why what it lacks is withheld, when known
         if self._cone_state.get(estimate.cone) != said:
             level = Log.WARNING if state == "outside" else Log.INFO
             self.file.write("/log", log_message(ns, f"cone {estimate.cone}: {said}", level), ns)
