@@ -95,3 +95,17 @@ def test_simulate_random_writes_a_rig_the_tracker_reads(tmp_path: Path) -> None:
     assert all((out / c.source).is_file() for c in rig.cameras)
     both = run_cli(["simulate", "random-2", "--random", "2", "-o", str(tmp_path / "x")])
     assert both.returncode == 2 and "exactly one" in both.stderr
+
+
+def test_motion_blur_is_drawn_while_a_marker_crosses_a_cameras_plane() -> None:
+    """random-3001: a topside marker passes the plane of fixed2's lens during an exposure (in front at its start,
+    not at its end); the blur is the motion of the markers in front all through it (it stopped the render)."""
+    from tracking.sim.command import plan_frames
+
+    sc = random_scenario(3001)
+    world = World(sc, float(sc.duration), sc.seed)
+    (i, cam), = [(i, c) for i, c in enumerate(sc.cameras) if c.name == "fixed2"]
+    plan = plan_frames(cam, i, float(sc.duration), sc.seed)
+    cam = cam.model_copy(update={"time_offset": plan.time_offset})
+    blur = [world.blur(cam, float(t)) for t in plan.capture_times if 12.5 < t < 13.2]
+    assert len(blur) >= 8 and np.isfinite(blur).all()

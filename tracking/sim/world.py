@@ -102,17 +102,19 @@ class World:
         h = cam.exposure / 2
         pts = self.marker_centres()
         K = np.array([[cam.K[0], 0, cam.K[2]], [0, cam.K[1], cam.K[3]], [0, 0, 1.0]])
-        uv = []
+        Pc = []
         for tt in (t - h, t + h):
             T_cj = np.linalg.inv(self.motion.camera(cam.name, tt))
             Ttop = self.motion.topside(tt)
             P = np.array([apply(Ttop if body == "topside" else np.eye(4), c[None])[0] for body, c in pts])
-            Pc = apply(T_cj, P)
-            Pc = Pc[Pc[:, 2] > 1.0]
-            q = Pc @ K.T
-            uv.append(q[:, :2] / q[:, 2:3])
-        if not len(uv[0]):
+            Pc.append(apply(T_cj, P))
+        ahead = (Pc[0][:, 2] > 1.0) & (Pc[1][:, 2] > 1.0)  # the centres in front of the camera all through the exposure
+        if not ahead.any():
             return (0.0, 0.0)
+        uv = []
+        for P in Pc:
+            q = P[ahead] @ K.T
+            uv.append(q[:, :2] / q[:, 2:3])
         d = (uv[1] - uv[0]).mean(axis=0)
         return (float(d[0]), float(d[1]))
 
