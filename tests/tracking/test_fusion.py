@@ -107,6 +107,18 @@ def test_a_cone_seen_from_one_side_shows_the_axes_it_sees() -> None:
         assert (np.abs(error) < 3 * e.sigma[shown]).all()
 
 
+@pytest.mark.parametrize("estimator", [fused_estimates, smoothed_estimates])
+def test_a_cone_whose_pair_no_camera_measures_is_shown_whole_or_not_at_all(estimator) -> None:
+    """D has a pair no camera sees: its offset comes through the topside's turn, as at a cone without markers, and
+    is never shown on some axes alone; A, measured by one camera along y, still is."""
+    the_rig = rig({("A", "ahead"): (0, 1), ("D", "port"): (4, 5)})
+    est = [e for e in estimator(the_rig, [m for m in stream(the_rig, 10.0) if m.cone == "A"]) if e.time > 2.0]
+    d = [e for e in est if e.cone == "D"]
+    assert d and all(np.isfinite(e.offset).all() or np.isnan(e.offset).all() for e in d)
+    assert any(np.isnan(e.offset).all() and e.withheld == WITHHELD_SIGMA for e in d)
+    assert any(np.isfinite(e.offset).any() and not np.isfinite(e.offset).all() for e in est if e.cone == "A")
+
+
 def test_smoother_beats_filter() -> None:
     the_rig = rig()
     ms = stream(the_rig, 8.0, seed=3)

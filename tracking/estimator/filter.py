@@ -10,7 +10,7 @@ says it cannot be known, or whose offset only a rig error explains, is withheld 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -121,6 +121,7 @@ class TopsideFilter(FilterState):
         self.apply(H, y, R)
         self.consecutive_rejects = 0
         self.last_accepted[m.camera] = m.time
+        self.pair_seen[m.cone] = m.time
         if self.placed_at is None:
             self.placed_at = m.time
         return True
@@ -179,6 +180,8 @@ class TopsideFilter(FilterState):
             self.consecutive_rejects = 0
             self.last_accepted[o.camera] = o.time
             self.disagreement.record(residuals)
+            if used_jacket:
+                self._measured_pairs(o.time, jacket, topside)
         return used_topside
 
     def _jumped(self, cam: CameraState, view: BodyPose) -> bool:
@@ -251,21 +254,34 @@ class TopsideFilter(FilterState):
         now = self.time if self.time is not None else -np.inf
         return tuple(sorted(c for c, t in self.last_accepted.items() if now - t <= CONTRIBUTION_WINDOW_S))
 
+    def measured(self) -> frozenset[str]:
+        """The cones whose pair a camera's frame measured (both its markers used) within CONTRIBUTION_WINDOW_S of the
+        current time: their offsets are measured there; the others' come through the rigid topside."""
+        now = self.time if self.time is not None else -np.inf
+        return frozenset(cone for cone, t in self.pair_seen.items() if now - t <= CONTRIBUTION_WINDOW_S)
+
+    def _measured_pairs(self, time: float, jacket: Iterable[int], topside: Iterable[int]) -> None:
+        """Note the pairs both of whose markers a frame showed, its jacket and topside corners both used."""
+        seen = {*jacket, *topside}
+        for cone, j, t in self.pair_ids:
+            if j in seen and t in seen:
+                self.pair_seen[cone] = time
+
     def warming(self) -> bool:
         """Whether the filter is within REPORT_WARMUP_S of the topside's (last) placement."""
         return self.placed_at is None or self.time is None or self.time - self.placed_at < REPORT_WARMUP_S
 
     def cone_estimates(self, x: np.ndarray | None = None, P: np.ndarray | None = None,
                        time: float | None = None, cameras: tuple[str, ...] | None = None,
-                       warming: bool | None = None, floors: tuple[np.ndarray, np.ndarray] | None = None
-                       ) -> list[ConeEstimate]:
+                       warming: bool | None = None, floors: tuple[np.ndarray, np.ndarray] | None = None,
+                       measured: frozenset[str] | None = None) -> list[ConeEstimate]:
         """Offset and covariance at every cone from a state (default: the current one), its variance per axis at least
         its cameras' disagreement (floors: (C, 3) variances and (C,) cones whose cameras are not yet compared,
         default: the current ones, tracking.estimator.disagreement), withholding cones whose σ exceeds
         REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_SIDES of a marker side while warming (default: whether the filter
-        is now; after the warm-up, at a cone with marker pairs, only its axes beyond the limit), or whose cameras are
-        not yet compared; from the current state, with the placed cameras' poses (a past state's are relative to
-        nominals since moved). A past state without its floors gets none."""
+        is now; after the warm-up, at a cone whose pair a camera measures (measured, default: now), only its axes
+        beyond the limit), or whose cameras are not yet compared; from the current state, with the placed cameras'
+        poses (a past state's are relative to nominals since moved). A past state without its floors gets none."""
         poses = None if x is not None else CameraPoses(
             {name: (cam.T_jacket_camera, cam.index) for name, cam in self.cameras.items()
              if cam.T_jacket_camera is not None}, self.x[:self.body_size].copy())
@@ -278,6 +294,7 @@ class TopsideFilter(FilterState):
         added, pending = floors
         cameras = self.contributing() if cameras is None else cameras
         warming = self.warming() if warming is None else warming
+        measured = self.measured() if measured is None else measured
         limit = min(REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_SIDES * self.rig.marker_size) if warming \
             else REPORT_MAX_SIGMA_M
         clock = self.clock_bound(cameras)
@@ -296,9 +313,9 @@ class TopsideFilter(FilterState):
         mismatch = self.scale.mismatch  # every offset scaled: once a time, not once a cone
         for k, (cone, offset, cov, sd, timed_sd) in enumerate(zip(names, offsets, covs, sds, timed_sds, strict=True)):
             withheld = self._withheld(float(offset[2]), sd, timed_sd, limit, mismatch, bool(pending[k]))
-            if withheld in (WITHHELD_SIGMA, WITHHELD_CLOCKS) and cone in self.paired and not warming:  # its axes
+            if withheld in (WITHHELD_SIGMA, WITHHELD_CLOCKS) and cone in measured and not warming:  # its axes
                 offset = np.where(np.array(sd) > limit, np.nan, offset)  # within the limit stay: one camera sees
-                # height, not depth. Not at a cone without a pair (its axes all lean on the topside's turn over tens
+                # height, not depth. Not at a cone no pair measures (its axes all lean on the topside's turn over tens
             elif withheld:  # of metres, where an error no σ holds grows), nor in the warm-up (its poses are not
                 offset = np.full(3, np.nan)  # Gaussian): there, whole (docs/accuracy.md)
             out.append(ConeEstimate(time, cone, offset, cameras, cov, poses, withheld))

@@ -34,6 +34,7 @@ class FilterStep:
     warming: bool  # within REPORT_WARMUP_S of the topside's (last) placement
     floors: tuple[np.ndarray, np.ndarray]  # the cameras' disagreement at each cone (estimator.disagreement): the
     # variance it adds (C, 3) and the cones whose cameras are not yet compared (C,)
+    measured: frozenset[str] = frozenset()  # the cones whose pair a camera saw then (TopsideFilter.measured)
     replaced: bool = False  # a camera was placed again in this step (TopsideFilter.replacements): no linear
     # transition leads into it, so the backward pass starts afresh before it
 
@@ -62,7 +63,7 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
         if kf.last_accepted:
             now = group[0].time if kf.time is None else kf.time  # predict set it
             steps.append(FilterStep(now, x_pred, kf.x.copy(), kf.P.copy(), F, kf.contributing(), kf.warming(),
-                                    kf.disagreement.floors(now), kf.replacements != replacements))
+                                    kf.disagreement.floors(now), kf.measured(), kf.replacements != replacements))
             if steps[-1].time - steps[0].time >= span_s + lag_s:
                 yield from _smooth_back(kf, steps, steps[-1].time - lag_s)
     yield from _smooth_back(kf, steps, np.inf)
@@ -77,7 +78,8 @@ def _smooth_back(kf: TopsideFilter, steps: list[FilterStep], until: float) -> It
         return
     nxt = steps[-1]
     x_s = nxt.x
-    out = [kf.cone_estimates(x_s, nxt.P, nxt.time, nxt.cameras, nxt.warming, nxt.floors)] if nxt.time < until else []
+    out = [kf.cone_estimates(x_s, nxt.P, nxt.time, nxt.cameras, nxt.warming, nxt.floors, nxt.measured)
+           ] if nxt.time < until else []
     for step in reversed(steps[:-1]):
         if nxt.replaced:  # a camera's nominal pose jumped within nxt: its errors before and after are not one state
             x_s = step.x
@@ -88,7 +90,8 @@ def _smooth_back(kf: TopsideFilter, steps: list[FilterStep], until: float) -> It
             x_s = step.x + C @ (x_s[:n] - nxt.x_pred)
             x_s[kf.consider.indices] = 0.0  # considered, not estimated (FilterState.apply)
         if step.time < until:
-            out.append(kf.cone_estimates(x_s, step.P, step.time, step.cameras, step.warming, step.floors))
+            out.append(kf.cone_estimates(x_s, step.P, step.time, step.cameras, step.warming, step.floors,
+                                          step.measured))
         nxt = step
     del steps[:len(out)]  # the smoothed ones are the oldest: the rest waits for more of the future
     for estimates in reversed(out):

@@ -201,6 +201,8 @@ class FilterState:
     centres: dict[int, np.ndarray] = field(init=False)  # marker id -> its centre (3,), its body's frame
     cones: dict[str, np.ndarray] = field(init=False)  # cone -> the point (3,) whose offset is the cone's
     paired: frozenset[str] = field(init=False)  # the cones with marker pairs (the others' offsets: through the topside)
+    pair_ids: tuple[tuple[str, int, int], ...] = field(init=False)  # (cone, jacket id, topside id) of every pair
+    pair_seen: dict[str, float] = field(init=False)  # cone -> capture time a camera's frame last measured its pair
     cone_rows: tuple[list[str], np.ndarray] = field(init=False)  # the cones in name order and their offsets' (C, 3,
     # 12) point_offset_matrix
     clock_sigma: dict[str, float] = field(init=False)  # camera -> its clock's σ, s (rig: time_offset_sigma)
@@ -227,6 +229,8 @@ class FilterState:
         self.centres = {m.id: np.array(m.center, dtype=float) for m in self.rig.markers}
         self.cones = cone_points(self.rig)
         self.paired = frozenset(self.rig.paired_cones())
+        self.pair_ids = tuple((p.cone, p.jacket, p.topside) for p in self.rig.all_pairs())
+        self.pair_seen = {}
         names = sorted(self.cones)
         self.cone_rows = (names, np.array([point_offset_matrix(self.cones[c]) for c in names]).reshape(-1, 3, STATE))
         self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}
