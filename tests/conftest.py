@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.synthetic import PAPER_DIST, render_installation
+from tests.synthetic import PAPER_DIST, made_once, render_installation
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
@@ -37,11 +37,15 @@ def motion(t: float) -> np.ndarray:
 
 @pytest.fixture(scope="session")
 def installation(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Cone A with two faces filmed by two unsynchronised cameras: rig, calibration, H.264 videos, truth.csv."""
-    folder = tmp_path_factory.mktemp("installation")
-    t = T0 + np.arange(FRAMES) / FPS
-    render_installation(folder, motion, {"cam-ahead": t, "cam-port": t + 1 / 30}, PAPER_DIST)
-    return folder
+    """Cone A with two faces filmed by two unsynchronised cameras: rig, calibration, H.264 videos, truth.csv (made
+    once per run for every worker: read it, write beside it in a test's own folder)."""
+
+    def make(folder: Path) -> None:
+        folder.mkdir()
+        t = T0 + np.arange(FRAMES) / FPS
+        render_installation(folder, motion, {"cam-ahead": t, "cam-port": t + 1 / 30}, PAPER_DIST)
+
+    return made_once(tmp_path_factory, "installation", make)
 
 
 @dataclass(frozen=True)
@@ -55,12 +59,16 @@ class Archived:
 
 @pytest.fixture(scope="session")
 def archived(installation: Path, tmp_path_factory: pytest.TempPathFactory) -> Archived:
-    """The installation tracked once per session into a recording, an archive and the offsets CSV."""
-    out = tmp_path_factory.mktemp("archived")
-    proc = subprocess.run([sys.executable, "-m", "tracking.cli", "track", "--rig", str(installation / "rig.yaml"),
-                           "--truth", str(installation / "truth.csv"), "-o", str(out / "offsets.csv"),
-                           "--rrd", str(out / "run.rrd"), "--mcap", str(out / "run.mcap"),
-                           "--vessel", "Sleipnir", "--operator", "J. Doe"],
-                          capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
+    """The installation tracked once per run into a recording, an archive and the offsets CSV."""
+
+    def make(out: Path) -> None:
+        out.mkdir()
+        proc = subprocess.run([sys.executable, "-m", "tracking.cli", "track", "--rig", str(installation / "rig.yaml"),
+                               "--truth", str(installation / "truth.csv"), "-o", str(out / "offsets.csv"),
+                               "--rrd", str(out / "run.rrd"), "--mcap", str(out / "run.mcap"),
+                               "--vessel", "Sleipnir", "--operator", "J. Doe"],
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+
+    out = made_once(tmp_path_factory, "archived", make)
     return Archived(out / "run.rrd", out / "run.mcap", out / "offsets.csv")
