@@ -160,9 +160,10 @@ def test_live_streams_every_schema_of_the_archive_to_a_foxglove_client(installat
     port = free_port()
     proc = subprocess.Popen([sys.executable, "-m", "tracking.cli", "live", "--rig", str(installation / "rig.yaml"),
                              "--rrd", str(tmp_path / "live.rrd"), "--foxglove", "--port", str(port),
-                             "--speed", "0.1", "--loop", "--duration", "4"],  # 0.8 s of video over 8 s, again
+                             "--speed", "0.05", "--loop", "--duration", "4"],  # 0.8 s of video over 16 s, again
                             # and again: the client subscribes in time, and a start starved of CPU by the tests
-                            # beside it (frames recorded only, to keep up) cannot leave it without an estimate
+                            # beside it (frames recorded only, to keep up) cannot leave it without an estimate, nor
+                            # without a change of the cone's state (each is a log message)
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + START_TIMEOUT_S

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser import chromium, ring_pixels, serving, web_viewer
+from tests.browser import RING_MIN_PX, chromium, ring_pixels, serving, web_viewer
 from tests.viewer.test_playback import free_port
-from viewer.superintendent import ROOT, STATE_RING_PX
+from viewer.superintendent import ROOT
 
 START_TIMEOUT_S = 90.0
 PAGE_TIMEOUT_S = 60.0  # the viewer's 43 MB of WebAssembly, compiled and run on a loaded 2-core machine in software GL
@@ -41,7 +41,8 @@ def test_the_live_web_view_shows_every_cone_panel_on_a_tablet(installation: Path
             page.screenshot(tmp_path / "tablet.png")
         assert {name for _, name, _ in state.views} >= {"cone A", "cameras"}
         assert image.shape[:2] == (800, 1280)  # a 10-inch tablet's page
-        assert ring_pixels(image, 1)[0] > 2 * STATE_RING_PX * 100  # the bull's-eye's ring, in its state's colour
+        assert ring_pixels(image, 1)[0] >= RING_MIN_PX  # the bull's-eye's ring, in its state's colour (NO DATA's
+        # grey under its longest label, 'no measurement yet', keeps ~530 px of its exact colour; a shown state's ~1200)
         assert t_views <= t_ring <= PAGE_TIMEOUT_S
     finally:
         proc.send_signal(signal.SIGTERM)
