@@ -26,7 +26,7 @@ import pandas as pd
 import rerun as rr
 
 from tracking.camera import CameraModel
-from tracking.estimate import AXIS_NAMES, TOLERANCE_M, ConeEstimate, axes_withheld
+from tracking.estimate import TOLERANCE_M, ConeEstimate, axes_withheld
 from tracking.estimator import point_offset_matrix
 from tracking.geometry import quaternions_xyzw, rotation, transform
 from tracking.images import Frame, VideoHealth
@@ -455,9 +455,9 @@ def said_state(estimate: ConeEstimate) -> str:
     state = cone_state(estimate.offset)
     if not estimate.withheld:
         return state
-    axes = axes_withheld(estimate.offset)
-    partly = axes and axes != " and ".join(AXIS_NAMES)
-    return f"{state} ({axes} withheld: {estimate.withheld})" if partly else f"{state} ({estimate.withheld})"
+    if np.isfinite(estimate.offset).any():  # some axes shown: name the others
+        return f"{state} ({axes_withheld(estimate.offset)} withheld: {estimate.withheld})"
+    return f"{state} ({estimate.withheld})"
 
 
 @dataclass

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser import RING_MIN_PX, chromium, ring_pixels, serving, web_viewer
+from tests.browser import chromium, serving, web_viewer
 from tests.viewer.test_playback import free_port
 from viewer.superintendent import ROOT
 
@@ -37,12 +37,10 @@ def test_the_live_web_view_shows_every_cone_panel_on_a_tablet(installation: Path
             t_views, state = page.wait_for_state(
                 lambda s: column <= {origin for _, _, origin in s.views}
                 and s.timelines.get("capture_time", (None, None))[1] is not None, PAGE_TIMEOUT_S)
-            _, t_ring, image = page.wait_for_rings(1, PAGE_TIMEOUT_S)
+            _, t_ring, image = page.wait_for_rings(1, PAGE_TIMEOUT_S)  # a state ring (TimeoutError without one)
             page.screenshot(tmp_path / "tablet.png")
         assert {name for _, name, _ in state.views} >= {"cone A", "cameras"}
         assert image.shape[:2] == (800, 1280)  # a 10-inch tablet's page
-        assert ring_pixels(image, 1)[0] >= RING_MIN_PX  # the bull's-eye's ring, in its state's colour (NO DATA's
-        # grey under its longest label, 'no measurement yet', keeps ~530 px of its exact colour; a shown state's ~1200)
         assert t_views <= t_ring <= PAGE_TIMEOUT_S
     finally:
         proc.send_signal(signal.SIGTERM)

@@ -200,8 +200,8 @@ class FilterState:
     topside_corners: dict[int, np.ndarray] = field(init=False)  # marker id -> its corners (4, 3), topside frame
     centres: dict[int, np.ndarray] = field(init=False)  # marker id -> its centre (3,), its body's frame
     cones: dict[str, np.ndarray] = field(init=False)  # cone -> the point (3,) whose offset is the cone's
-    paired: frozenset[str] = field(init=False)  # the cones with marker pairs (the others' offsets: through the topside)
-    pair_ids: tuple[tuple[str, int, int], ...] = field(init=False)  # (cone, jacket id, topside id) of every pair
+    pair_ids: tuple[tuple[str, int, int], ...] = field(init=False)  # (cone, jacket id, topside id) of every pair (the
+    # other cones' offsets come through the topside)
     pair_seen: dict[str, float] = field(init=False)  # cone -> capture time a camera's frame last measured its pair
     cone_rows: tuple[list[str], np.ndarray] = field(init=False)  # the cones in name order and their offsets' (C, 3,
     # 12) point_offset_matrix
@@ -228,7 +228,6 @@ class FilterState:
                                 for i, T in geometry.topside.items()}
         self.centres = {m.id: np.array(m.center, dtype=float) for m in self.rig.markers}
         self.cones = cone_points(self.rig)
-        self.paired = frozenset(self.rig.paired_cones())
         self.pair_ids = tuple((p.cone, p.jacket, p.topside) for p in self.rig.all_pairs())
         self.pair_seen = {}
         names = sorted(self.cones)
