@@ -36,7 +36,7 @@ from tracking.estimate import ConeEstimate
 from tracking.estimator import ESTIMATORS
 from tracking.evaluate import Evaluation, errors, evaluate_runs, truth_at
 from tracking.images import Frame
-from tracking.pipeline import CameraTracker, track_rig
+from tracking.pipeline import CameraTracker, TrackStats, track_rig
 from tracking.rig import Rig, load_rig
 
 REPO = Path(__file__).resolve().parents[1]
@@ -199,13 +199,17 @@ def with_mounts(rig: Rig, name: str) -> Rig:
     return rig.model_copy(update={"cameras": cams})
 
 
-def measure(rig: Rig, detections: list[tuple[str, float, dict[int, np.ndarray]]]) -> list:
-    """Pair offsets and body observations, in capture-time order, from cached detections (camera, time, corners)."""
+def measure(rig: Rig, detections: list[tuple[str, float, dict[int, np.ndarray]]], stats: TrackStats | None = None
+            ) -> list:
+    """Pair offsets and body observations, in capture-time order, from cached detections (camera, time, corners);
+    stats: counts each frame, as track does (markers dropped as seen mirrored among them)."""
     trackers = {e.name: CameraTracker.from_rig(rig, e, DEFAULT_REFINEMENT) for e in rig.cameras}
     out: list = []
     for camera, t, corners in detections:
         found = Detections([MarkerDetection(i, c) for i, c in sorted(corners.items())])
         r = trackers[camera].measure(Frame(0, t, np.zeros((0, 0), np.uint8)), found)
+        if stats is not None:
+            stats.add(r)
         out.extend(r.offsets)
         if r.observation is not None:
             out.append(r.observation)

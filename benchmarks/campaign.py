@@ -42,6 +42,7 @@ from benchmarks.accuracy import detect, frame, measure
 from tracking.estimator import TopsideFilter, filter_frame, smoothed_estimates
 from tracking.estimator.measurements import frames as _frames
 from tracking.evaluate import truth_at
+from tracking.pipeline import TrackStats
 from tracking.rig import load_rig
 
 REPO = Path(__file__).resolve().parents[1]
@@ -193,7 +194,8 @@ def run(seed: int) -> dict:
     rig = load_rig(scene / "rig.yaml")
     detections = detect(name, scene)
     t2 = time.perf_counter()
-    measurements = measure(rig, detections)
+    stats = TrackStats()
+    measurements = measure(rig, detections, stats)
     sc = load_scenario(scene / "scenario.yaml")
     truth = pd.read_csv(scene / "truth.csv")
     cells = cell_px(scene, rig.dictionary)
@@ -218,7 +220,7 @@ def run(seed: int) -> dict:
     return {"seed": seed, "cameras": [(c.name, c.kind, c.watch, c.width, round(c.K[0])) for c in sc.cameras],
             "pairs": [(p.cone, p.face) for p in sc.pairs], "dictionary": rig.dictionary, "duration": sc.duration,
             "weather": sc.weather, "motion": sc.motion, "cones": cones, "unobserved": unobserved, "log": log,
-            "unplaced": log.unplaced, "seen": seen,
+            "unplaced": {name: stats.never_placed(name, why) for name, why in log.unplaced.items()}, "seen": seen,
             "cost": {"render": t1 - t0, "detect": t2 - t1, "estimate": t3 - t2}}
 
 

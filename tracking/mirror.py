@@ -18,12 +18,19 @@ within MIRROR_BODY_REACH_SIDES of it. A mirrored reading faces the wrong way or 
 a reflection in the sea sits tens of metres below. Otherwise it is dropped and counted: a marker seen from behind
 never reaches the poses or the filter. Left open: a reflection in a vertical surface within a few metres of a lone
 self-mirroring marker passes the loose check (the filter's gate is then the guard).
+Two self-mirroring markers, and nothing else in view (a drone watching one pair of DICT_4X4_50's 8 and 47), confirm
+each other where the rig puts them and a mirror would not: a mirror image of the pair reads them turned alike, so
+their relative turn agrees with the rig either way, but the vector from one to the other comes out turned by the
+mirrored reading's quarter turn (mirror_turn). The pair is kept where that vector, in the first reading's frame, is
+nearer the rig's than what a mirror behind or beside the pair (x reversed) or beneath it (the sea: y reversed) would
+show. A reading whose mirror image lands where the rig's would (DICT_4X4_50's 17, read unturned) confirms nothing.
 A rig whose ids have no mirror among them (DICT_6X6_250 below id 250 has none) is not affected at all.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -55,6 +62,69 @@ def mirror_ambiguous(rig: Rig, correction_rate: float | None = None) -> frozense
         if found and j in ids:
             out.add(int(j))
     return frozenset(out)
+
+
+MIRROR_READ_PX = 60  # side of the generated marker whose mirror image OpenCV reads to learn how a reading turns
+MIRROR_VIEWS = (np.diag([-1.0, 1.0]), np.diag([1.0, -1.0]))  # a face's (x, y) as a mirror shows them: from behind or
+# in a vertical reflector (x reversed), in the sea beneath (y reversed)
+
+
+@lru_cache(maxsize=64)
+def _mirror_turn(dictionary: str, marker_id: int) -> tuple[tuple[float, ...], ...] | None:
+    dictionary_ = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
+    margin = MIRROR_READ_PX // 3
+    image = cv2.copyMakeBorder(cv2.aruco.generateImageMarker(dictionary_, marker_id, MIRROR_READ_PX),
+                               margin, margin, margin, margin, cv2.BORDER_CONSTANT, value=255)
+    corners, ids, _ = cv2.aruco.ArucoDetector(dictionary_).detectMarkers(np.ascontiguousarray(image[:, ::-1]))
+    if ids is None or int(ids.reshape(-1)[0]) != marker_id:
+        return None
+    centre = (image.shape[1] - 1) / 2.0
+    seen = corners[0].reshape(4, 2) - centre
+    seen[:, 1] *= -1.0  # image (right, up)
+    read = marker_object_points(2.0)[:, :2]  # the reading's corners in its own frame (x right, y up)
+    turn = np.linalg.lstsq(read, seen, rcond=None)[0].T  # seen = turn @ read, up to scale
+    return tuple(map(tuple, np.round(turn / np.abs(turn).max())))
+
+
+def mirror_turn(dictionary: str, marker_id: int) -> np.ndarray | None:
+    """(2, 2) the in-plane map from a mirrored reading of a self-mirroring marker (its mirror image read as itself)
+    to the face's mirror image as seen (right, up), learnt by having OpenCV read the marker's generated image flipped,
+    so that its corner order holds: a quarter turn for DICT_4X4_50's 8, 9 and 47, none for its 17; None when the
+    mirror image reads as another id."""
+    turn = _mirror_turn(dictionary, marker_id)
+    return None if turn is None else np.array(turn)
+
+
+def mirror_turns(rig: Rig) -> dict[int, np.ndarray]:
+    """id -> mirror_turn for the rig's self-mirroring markers (the only ones a pair of readings can confirm)."""
+    out = {}
+    for i in sorted(mirror_ambiguous(rig)):
+        turn = mirror_turn(rig.dictionary, i)
+        if turn is not None:
+            out[i] = turn
+    return out
+
+
+def confirmed_by_each_other(a: MarkerPose, b: MarkerPose, markers: Mapping[int, Marker],
+                            turns: Mapping[int, np.ndarray], size: float) -> bool:
+    """Whether two self-mirroring readings confirm each other: b's reading, in a's, turned within MIRROR_BODY_TURN_RAD
+    of where the mated rig puts it and within MIRROR_BODY_REACH_SIDES, and the in-plane vector from a to b nearer the
+    rig's than any mirror's (MIRROR_VIEWS through a's mirror_turn), over either IPPE solution of each."""
+    T_a_b = inverse(markers[a.id].T_body_marker) @ markers[b.id].T_body_marker  # body frames coincide when mated
+    rig_vector = T_a_b[:2, 3]
+    mirrored = [turns[a.id].T @ view @ rig_vector for view in MIRROR_VIEWS]
+    if min(np.linalg.norm(m - rig_vector) for m in mirrored) < MIRROR_TOLERANCE * size:
+        return False  # a mirror would put b where the rig does: the readings cannot tell
+    to_rig = to_mirror = np.inf
+    for sa in a.solutions:
+        for sb in b.solutions:
+            T = inverse(sa.T_camera_marker) @ sb.T_camera_marker
+            if rotation_angle(T[:3, :3], T_a_b[:3, :3]) >= MIRROR_BODY_TURN_RAD or \
+                    np.linalg.norm(T[:3, 3] - T_a_b[:3, 3]) >= MIRROR_BODY_REACH_SIDES * size:
+                continue
+            to_rig = min(to_rig, float(np.linalg.norm(T[:2, 3] - rig_vector)))
+            to_mirror = min(to_mirror, *(float(np.linalg.norm(T[:2, 3] - m)) for m in mirrored))
+    return to_rig < to_mirror
 
 
 def _predicted_corners(anchor: MarkerPose, T_body_anchor: np.ndarray, T_body_marker: np.ndarray, size: float,
@@ -105,11 +175,18 @@ def confirmed_by_other_body(pose: MarkerPose, poses: Mapping[int, MarkerPose], m
 
 
 def drop_mirrored(poses: dict[int, MarkerPose], markers: Mapping[int, Marker], ambiguous: frozenset[int],
-                  size: float, camera: CameraModel) -> tuple[dict[int, MarkerPose], list[int]]:
-    """The frame's poses without the mirror-ambiguous ones nothing confirms, and the ids dropped."""
+                  size: float, camera: CameraModel, turns: Mapping[int, np.ndarray] | None = None
+                  ) -> tuple[dict[int, MarkerPose], list[int]]:
+    """The frame's poses without the mirror-ambiguous ones nothing confirms, and the ids dropped; turns: the rig's
+    mirror_turns, with which two self-mirroring readings may confirm each other."""
     if not ambiguous or not ambiguous & poses.keys():
         return poses, []
     dropped = [i for i in sorted(ambiguous & poses.keys())
                if not confirmed(poses[i], poses, markers, ambiguous, size, camera)
                and not confirmed_by_other_body(poses[i], poses, markers, ambiguous, size)]
+    if turns:
+        pairs = [(i, j) for i in dropped for j in dropped if i != j and i in turns and j in turns]
+        mutual = {k for i, j in pairs if confirmed_by_each_other(poses[i], poses[j], markers, turns, size)
+                  for k in (i, j)}
+        dropped = [i for i in dropped if i not in mutual]
     return {i: p for i, p in poses.items() if i not in dropped}, dropped

@@ -9,13 +9,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Protocol
 
+import numpy as np
+
 from tracking.camera import CameraModel, load_camera
 from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetector, Refinement
 from tracking.errors import InputError
 from tracking.estimate import ConeEstimate
 from tracking.images import Frame, VideoHealth, frames, to_the_end
 from tracking.marker_tracker import MarkerTracker
-from tracking.mirror import drop_mirrored, mirror_ambiguous
+from tracking.mirror import drop_mirrored, mirror_ambiguous, mirror_turns
 from tracking.offsets import (
     BodyGeometry,
     BodyObservation,
@@ -144,12 +146,14 @@ class CameraTracker:
     markers: dict[int, Marker] = field(default_factory=dict)
     bodies: BodyGeometry | None = None
     ambiguous: frozenset[int] = frozenset()  # rig ids a mirror image can read as (tracking.mirror)
+    turns: dict[int, np.ndarray] = field(default_factory=dict)  # self-mirroring ids -> how a mirror turns their reading
 
     def __post_init__(self) -> None:
         self.geometries = pair_geometries(self.rig)
         self.markers = self.rig.marker_by_id
         self.bodies = body_geometry(self.rig)
         self.ambiguous = mirror_ambiguous(self.rig)
+        self.turns = mirror_turns(self.rig)
 
     @classmethod
     def from_rig(cls, rig: Rig, entry: CameraEntry, refinement: Refinement, keep_color: bool = False,
@@ -178,7 +182,8 @@ class CameraTracker:
         """Poses, pair offsets and the body observation of one frame's detections."""
         poses = {d.id: estimate_pose(d, self.camera, self.rig.marker_size) for d in detections.markers
                  if d.id in self.markers}
-        poses, mirrored = drop_mirrored(poses, self.markers, self.ambiguous, self.rig.marker_size, self.camera)
+        poses, mirrored = drop_mirrored(poses, self.markers, self.ambiguous, self.rig.marker_size, self.camera,
+                                          self.turns)
         unknown = [d.id for d in detections.markers if d.id not in self.markers]
         offsets = frame_offsets(self.geometries, poses, self.entry.name, frame.time)
         assert self.bodies is not None

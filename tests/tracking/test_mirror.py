@@ -10,7 +10,7 @@ import pytest
 from tests.synthetic import PlacedMarker, render, true_corners
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetector
-from tracking.mirror import drop_mirrored, mirror_ambiguous
+from tracking.mirror import drop_mirrored, mirror_ambiguous, mirror_turn, mirror_turns
 from tracking.pose import estimate_pose
 from tracking.rig import Marker, Rig
 
@@ -118,3 +118,42 @@ def test_white_on_black_markers_are_found_and_fitted(distance: float) -> None:
     assert [d.id for d in found] == [5, 6]
     for d, m in zip(found, placed, strict=True):
         assert np.abs(d.corners - true_corners(K, DIST, m)).max() < 0.1  # px: the edge fit on the negative
+
+
+def test_a_pair_of_self_mirroring_markers_confirms_itself_where_a_mirror_would_not() -> None:
+    """A camera that sees only a pair of self-mirroring markers (DICT_4X4_1000's 8 on the jacket, 9 on the topside
+    above it: both read the same in a mirror, turned a quarter turn) keeps both, at the mated place and set down 2 cm
+    off it; the pair's mirror image (each plate flipped where it is: a reflector parallel to the face) is dropped,
+    because it puts 9 beside 8, not above it."""
+    rig = Rig(dictionary="DICT_4X4_1000", marker_size=SIDE, markers=[
+        Marker(id=8, body="jacket", cone="A", face="astern", center=[0.0, 0.0, 0.0]),
+        Marker(id=9, body="topside", cone="A", face="astern", center=[0.0, 0.0, 0.08])])
+    assert mirror_ambiguous(rig) == {8, 9}
+    turns = mirror_turns(rig)
+    assert set(turns) == {8, 9} and abs(np.linalg.det(turns[8])) == 1.0 and turns[8][0, 0] == 0.0  # a quarter turn
+    camera = CameraModel(K, DIST, *SIZE)
+    jacket = placements(rig)[0]
+    T_camera_body = jacket.T_camera_marker @ np.linalg.inv(rig.markers[0].T_body_marker)
+    for lift in ([0.0, 0.0, 0.0], [0.01, 0.0, 0.02]):
+        T_jacket_topside = np.eye(4)
+        T_jacket_topside[:3, 3] = lift
+        topside = PlacedMarker(9, T_camera_body @ T_jacket_topside @ rig.markers[1].T_body_marker, SIDE)
+        image = render(K, DIST, SIZE, [jacket, topside], DICT)
+        seen = poses_of(rig, image)
+        assert set(seen) == {8, 9}
+        assert drop_mirrored(seen, rig.marker_by_id, mirror_ambiguous(rig), SIDE, camera) == ({}, [8, 9])  # alone
+        kept, dropped = drop_mirrored(seen, rig.marker_by_id, mirror_ambiguous(rig), SIDE, camera, turns)
+        assert set(kept) == {8, 9} and dropped == []
+        mirror = poses_of(rig, mirrored(mirrored(image, jacket), topside))
+        assert set(mirror) == {8, 9}
+        kept, dropped = drop_mirrored(mirror, rig.marker_by_id, mirror_ambiguous(rig), SIDE, camera, turns)
+        assert kept == {} and dropped == [8, 9]
+
+
+def test_a_mirror_turn_is_learnt_from_the_dictionary() -> None:
+    """DICT_4X4_50's self-mirroring ids: 8, 9 and 47 read a quarter turn round in a mirror, 17 unturned (its pair's
+    mirror image would land where the rig's does: it confirms nothing); an id whose mirror reads as another has none."""
+    for i in (8, 9, 47):
+        assert np.array_equal(mirror_turn("DICT_4X4_50", i), [[0.0, 1.0], [-1.0, 0.0]])
+    assert np.array_equal(mirror_turn("DICT_4X4_50", 17), np.eye(2))
+    assert mirror_turn("DICT_4X4_1000", 0) is None  # its mirror reads as 871
