@@ -57,6 +57,7 @@ from tracking.estimator import TopsideFilter, cone_points, filter_frame, point_o
 from tracking.estimator.noise import MOUNT_MISMATCH, REPORT_MAX_SIGMA_M, STATE
 from tracking.estimator.state import topside_pose
 from tracking.images import Frame, VideoHealth
+from tracking.mirror import seen_only_mirrored
 from tracking.offsets import BodyObservation, PairOffset
 from tracking.pipeline import CameraTracker, FrameResult
 from tracking.rig import Rig
@@ -153,12 +154,16 @@ class CameraCheck:
     model: CameraModel | None = None  # its calibration (sized by the first frame when the file gave no size)
     unplaced: str = ""  # why the fusion filter never placed it (tracking.estimator CameraState.waiting); empty: placed
     moves: str = ""  # its mount, where its images show it moving far more than the mount allows: the mount it needs
+    mirrored: tuple[int, ...] = ()  # rig ids it detected and dropped as possibly seen mirrored (tracking.mirror)
 
     @property
     def problems(self) -> list[str]:
         """One line per problem of this camera."""
         out = [f"{self.camera}: clock {p}" for p in self.clock.problems]
-        if not self.sights:
+        if not self.sights and self.mirrored:
+            out.append(f"{self.camera}: never placed, so none of its frames is used: "
+                       f"{seen_only_mirrored(list(self.mirrored))}")
+        elif not self.sights:
             out.append(f"{self.camera}: sees no marker of the rig in {self.clock.frames} frames")
         elif self.unplaced:
             out.append(f"{self.camera}: never placed, so none of its frames is used: {self.unplaced}")
@@ -464,7 +469,8 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
         unplaced = kf.cameras[name].waiting if kf.cameras[name].T_jacket_camera is None else ""
         cameras.append(CameraCheck(name, clock, tuple(seen), dict(unknown), T_jacket_camera, T_jacket_markers,
                                    survey_m, name in kf.survey_conflicts, run.first_frame, run.tracker.camera,
-                                   unplaced, mount_mismatch(kf, name)))
+                                   unplaced, mount_mismatch(kf, name),
+                                   tuple(sorted({i for r in run.results for i in r.mirrored}))))
         disagreements += relative_disagreements(rig, name, run.results, run.tracker.camera)
         disagreements += tilt_disagreements(rig, name, run.results)
     points = cone_points(rig)

@@ -49,6 +49,12 @@ MIRROR_BODY_REACH_SIDES = 20.0  # marker sides (20 m at 1 m markers): a topside 
 # cones; a reflection in the sea is twice the marker's height above it away
 
 
+def seen_only_mirrored(ids: list[int]) -> str:
+    """Why a camera whose every rig marker was dropped as seen mirrored is not used."""
+    return (f"its rig markers ({', '.join(map(str, ids))}) were seen only mirrored (the board's back, or a reflection) "
+            "and nothing confirmed them: a marker of another id in its view would")
+
+
 def mirror_ambiguous(rig: Rig, correction_rate: float | None = None) -> frozenset[int]:
     """Rig ids that the mirror image of some rig marker reads as (correction_rate: the detector's, OpenCV's default
     when None)."""

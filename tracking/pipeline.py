@@ -17,7 +17,7 @@ from tracking.errors import InputError
 from tracking.estimate import ConeEstimate
 from tracking.images import Frame, VideoHealth, frames, to_the_end
 from tracking.marker_tracker import MarkerTracker
-from tracking.mirror import drop_mirrored, mirror_ambiguous, mirror_turns
+from tracking.mirror import drop_mirrored, mirror_ambiguous, mirror_turns, seen_only_mirrored
 from tracking.offsets import (
     BodyGeometry,
     BodyObservation,
@@ -116,8 +116,7 @@ class TrackStats:
         mirrored = sorted(i for (cam, i) in self.mirrored if cam == camera)
         if not mirrored or why != NOT_SEEN:
             return why
-        return (f"its rig markers ({', '.join(map(str, mirrored))}) were seen only mirrored (the board's back, or a "
-                "reflection) and nothing confirmed them")
+        return seen_only_mirrored(mirrored)
 
     def warnings(self, cameras: Iterable[str] = ()) -> list[str]:
         """One line per camera whose video ended early, or whose timestamps went backwards, repeated, jumped or were

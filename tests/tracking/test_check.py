@@ -15,7 +15,16 @@ import pytest
 import yaml
 
 from tests.synthetic import simulated_once
-from tracking.check import CameraRun, CheckReport, MarkerSight, camera_clock, check_runs, cone_checks, run_cameras
+from tracking.check import (
+    CameraCheck,
+    CameraRun,
+    CheckReport,
+    MarkerSight,
+    camera_clock,
+    check_runs,
+    cone_checks,
+    run_cameras,
+)
 from tracking.estimate import ConeEstimate
 from tracking.images import VideoHealth
 from tracking.pipeline import CameraTracker
@@ -230,6 +239,17 @@ def test_clock_problems() -> None:
     jitter = np.arange(150) / 30.0 + np.random.default_rng(0).uniform(-0.012, 0.012, 150)
     assert camera_clock("cam", jitter, health(30.0)).irregular > 10
     assert camera_clock("cam", np.array([1.0]), health(30.0)).problems == ["1 frame: no interval to measure"]
+
+
+
+def test_a_camera_whose_rig_markers_were_all_dropped_as_mirrored_says_so_not_that_it_saw_none() -> None:
+    clock = camera_clock("drone2", np.arange(150) / 30.0, health(30.0))
+    mirrored = CameraCheck("drone2", clock, (), {}, None, unplaced="no rig marker in any of its frames", mirrored=(8,))
+    assert mirrored.problems == ["drone2: never placed, so none of its frames is used: its rig markers (8) were seen "
+                                 "only mirrored (the board's back, or a reflection) and nothing confirmed them: a "
+                                 "marker of another id in its view would"]
+    blind = dataclasses.replace(mirrored, mirrored=())
+    assert blind.problems == ["drone2: sees no marker of the rig in 150 frames"]
 
 
 # --- the command ------------------------------------------------------------------------------------------------------
