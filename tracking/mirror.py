@@ -19,12 +19,16 @@ a reflection in the sea sits tens of metres below. Otherwise it is dropped and c
 never reaches the poses or the filter. Left open: a reflection in a vertical surface within a few metres of a lone
 self-mirroring marker passes the loose check (the filter's gate is then the guard).
 Two self-mirroring markers, and nothing else in view (a drone watching one pair of DICT_4X4_50's 8 and 47), confirm
-each other where the rig puts them and a mirror would not: a mirror image of the pair reads them turned alike, so
-their relative turn agrees with the rig either way, but the vector from one to the other comes out turned by the
-mirrored reading's quarter turn (mirror_turn). The pair is kept where that vector, in the first reading's frame, is
-nearer the rig's than what a mirror behind or beside the pair (x reversed) or beneath it (the sea: y reversed) would
-show. A reading whose mirror image lands where the rig's would (DICT_4X4_50's 17, read unturned) confirms nothing.
-A rig whose ids have no mirror among them (DICT_6X6_250 below id 250 has none) is not affected at all.
+each other where the rig's set-down explains them far better than a mirror would. Any reflector (behind the face,
+beside it, the sea beneath it, tilted) shows a face as its left-right mirror image, turned; the reading turns with it,
+so a mirror shows the pair's vector (the second marker from the first, in the first's frame) mirrored left-right and
+turned by the reading's turn (mirror_turn: a quarter turn for 8, 9 and 47). Their relative turn agrees with the rig's
+either way; the vector does not. Markers of two bodies are kept where the topside's displacement from mated that
+their vector implies is a hundred times likelier under a set-down prior (MIRROR_SETDOWN_SIGMA_M: a metre sideways,
+three above) than the displacement a mirror would imply (a topside metres sideways of its cone waits); two of one
+body where the first puts the second's corners as `confirmed` asks. A pair whose mirror image reads as the pair (17
+with 17-like unturned readings, or a pair on the one diagonal a mirror turned a quarter turn maps onto itself)
+confirms nothing.
 """
 
 from __future__ import annotations
@@ -71,8 +75,10 @@ def mirror_ambiguous(rig: Rig, correction_rate: float | None = None) -> frozense
 
 
 MIRROR_READ_PX = 60  # side of the generated marker whose mirror image OpenCV reads to learn how a reading turns
-MIRROR_VIEWS = (np.diag([-1.0, 1.0]), np.diag([1.0, -1.0]))  # a face's (x, y) as a mirror shows them: from behind or
-# in a vertical reflector (x reversed), in the sea beneath (y reversed)
+MIRROR_VIEW = np.diag([-1.0, 1.0])  # a face as any reflector shows it, up to a turn (which the reading shares)
+MIRROR_SETDOWN_SIGMA_M = np.array([1.0, 1.0, 3.0])  # jacket x, y, z: a topside near its cones is within a metre or
+# two sideways and hangs up to several metres above them (random-4001 hovers 2.7 m up, swinging 0.7 m)
+MIRROR_EVIDENCE_CHI2 = 9.21  # 2 ln 100: the rig's reading a hundred times likelier than the mirror's
 
 
 @lru_cache(maxsize=64)
@@ -111,26 +117,41 @@ def mirror_turns(rig: Rig) -> dict[int, np.ndarray]:
     return out
 
 
+def _setdown_d2(R_body_marker: np.ndarray, shift: np.ndarray) -> float:
+    """Squared Mahalanobis distance of an in-plane shift (2,) of a marker, in its frame, under the set-down prior."""
+    d = R_body_marker[:, :2] @ shift / MIRROR_SETDOWN_SIGMA_M
+    return float(d @ d)
+
+
 def confirmed_by_each_other(a: MarkerPose, b: MarkerPose, markers: Mapping[int, Marker],
-                            turns: Mapping[int, np.ndarray], size: float) -> bool:
-    """Whether two self-mirroring readings confirm each other: b's reading, in a's, turned within MIRROR_BODY_TURN_RAD
-    of where the mated rig puts it and within MIRROR_BODY_REACH_SIDES, and the in-plane vector from a to b nearer the
-    rig's than any mirror's (MIRROR_VIEWS through a's mirror_turn), over either IPPE solution of each."""
+                            turns: Mapping[int, np.ndarray], size: float, camera: CameraModel) -> bool:
+    """Whether two self-mirroring readings confirm each other. Of two bodies: b's reading, in a's, turned within
+    MIRROR_BODY_TURN_RAD of where the mated rig puts it and within MIRROR_BODY_REACH_SIDES, with the displacement from
+    mated its in-plane vector implies MIRROR_EVIDENCE_CHI2 nearer the set-down prior (MIRROR_SETDOWN_SIGMA_M) than the
+    one a mirror (MIRROR_VIEW through a's mirror_turn) implies, for either IPPE solution of each. Of one
+    body: a puts b's corners within MIRROR_TOLERANCE (as `confirmed`), where a mirror would put them elsewhere."""
     T_a_b = inverse(markers[a.id].T_body_marker) @ markers[b.id].T_body_marker  # body frames coincide when mated
     rig_vector = T_a_b[:2, 3]
-    mirrored = [turns[a.id].T @ view @ rig_vector for view in MIRROR_VIEWS]
-    if min(np.linalg.norm(m - rig_vector) for m in mirrored) < MIRROR_TOLERANCE * size:
-        return False  # a mirror would put b where the rig does: the readings cannot tell
-    to_rig = to_mirror = np.inf
+    G = turns[a.id].T @ MIRROR_VIEW  # a true vector in a's face as a mirrored reading of a shows it
+    if markers[a.id].body == markers[b.id].body:
+        if np.linalg.norm(G @ rig_vector - rig_vector) < 2 * MIRROR_TOLERANCE * size:
+            return False
+        corners = np.asarray(b.corners, dtype=float)
+        side = float(np.mean(np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)))
+        return any(np.mean(np.linalg.norm(predicted - corners, axis=1)) < MIRROR_TOLERANCE * side for predicted in
+                   _predicted_corners(a, markers[a.id].T_body_marker, markers[b.id].T_body_marker, size, camera))
+    R = markers[a.id].T_body_marker[:3, :3]
     for sa in a.solutions:
         for sb in b.solutions:
             T = inverse(sa.T_camera_marker) @ sb.T_camera_marker
             if rotation_angle(T[:3, :3], T_a_b[:3, :3]) >= MIRROR_BODY_TURN_RAD or \
                     np.linalg.norm(T[:3, 3] - T_a_b[:3, 3]) >= MIRROR_BODY_REACH_SIDES * size:
                 continue
-            to_rig = min(to_rig, float(np.linalg.norm(T[:2, 3] - rig_vector)))
-            to_mirror = min(to_mirror, *(float(np.linalg.norm(T[:2, 3] - m)) for m in mirrored))
-    return to_rig < to_mirror
+            seen = T[:2, 3]
+            rig_d2, mirror_d2 = _setdown_d2(R, seen - rig_vector), _setdown_d2(R, G.T @ seen - rig_vector)
+            if mirror_d2 - rig_d2 >= MIRROR_EVIDENCE_CHI2:
+                return True
+    return False
 
 
 def _predicted_corners(anchor: MarkerPose, T_body_anchor: np.ndarray, T_body_marker: np.ndarray, size: float,
@@ -192,7 +213,7 @@ def drop_mirrored(poses: dict[int, MarkerPose], markers: Mapping[int, Marker], a
                and not confirmed_by_other_body(poses[i], poses, markers, ambiguous, size)]
     if turns:
         pairs = [(i, j) for i in dropped for j in dropped if i != j and i in turns and j in turns]
-        mutual = {k for i, j in pairs if confirmed_by_each_other(poses[i], poses[j], markers, turns, size)
+        mutual = {k for i, j in pairs if confirmed_by_each_other(poses[i], poses[j], markers, turns, size, camera)
                   for k in (i, j)}
         dropped = [i for i in dropped if i not in mutual]
     return {i: p for i, p in poses.items() if i not in dropped}, dropped

@@ -30,7 +30,7 @@ def board_rig(ids: tuple[int, ...] = (5, 8), dictionary: str = "DICT_4X4_1000") 
 
 
 def placements(rig: Rig, distance: float = 0.6) -> list[PlacedMarker]:
-    """The rig's jacket markers square on to the camera at distance."""
+    """The rig's jacket markers square on to the camera at distance (of the rig's marker size)."""
     R_body_marker = rig.markers[0].T_body_marker[:3, :3]
     T_camera_body = np.eye(4)
     T_camera_body[:3, :3] = np.diag([1.0, -1.0, -1.0]) @ R_body_marker.T  # the face looks at the camera
@@ -39,7 +39,7 @@ def placements(rig: Rig, distance: float = 0.6) -> list[PlacedMarker]:
     for m in rig.markers:
         if m.body != "jacket":
             continue
-        out.append(PlacedMarker(m.id, T_camera_body @ m.T_body_marker, SIDE))
+        out.append(PlacedMarker(m.id, T_camera_body @ m.T_body_marker, rig.marker_size))
     return out
 
 
@@ -56,7 +56,7 @@ def mirrored(image: np.ndarray, m: PlacedMarker) -> np.ndarray:
 def poses_of(rig: Rig, image: np.ndarray) -> dict:
     camera = CameraModel(K, DIST, *SIZE)
     found = MarkerDetector(rig.dictionary, camera=camera).detect(image)
-    return {d.id: estimate_pose(d, camera, SIDE) for d in found.markers}
+    return {d.id: estimate_pose(d, camera, rig.marker_size) for d in found.markers}
 
 
 def test_the_ids_a_mirror_can_read_come_from_the_dictionary_and_the_rig() -> None:
@@ -120,34 +120,80 @@ def test_white_on_black_markers_are_found_and_fitted(distance: float) -> None:
         assert np.abs(d.corners - true_corners(K, DIST, m)).max() < 0.1  # px: the edge fit on the negative
 
 
-def test_a_pair_of_self_mirroring_markers_confirms_itself_where_a_mirror_would_not() -> None:
-    """A camera that sees only a pair of self-mirroring markers (DICT_4X4_1000's 8 on the jacket, 9 on the topside
-    above it: both read the same in a mirror, turned a quarter turn) keeps both, at the mated place and set down 2 cm
-    off it; the pair's mirror image (each plate flipped where it is: a reflector parallel to the face) is dropped,
-    because it puts 9 beside 8, not above it."""
-    rig = Rig(dictionary="DICT_4X4_1000", marker_size=SIDE, markers=[
+def reflected(image: np.ndarray, markers: list[PlacedMarker], upside_down: bool = False) -> np.ndarray:
+    """The image with the region holding markers mirrored left to right where it is (a reflector beside or behind
+    them), or upside down (the sea beneath them: a left-right mirror turned half round)."""
+    corners = np.concatenate([true_corners(K, DIST, m) for m in markers])
+    (x0, y0), (x1, y1) = np.floor(corners.min(axis=0)).astype(int) - 6, np.ceil(corners.max(axis=0)).astype(int) + 6
+    out = image.copy()
+    out[y0:y1, x0:x1] = image[y0:y1, x0:x1][::-1] if upside_down else image[y0:y1, x0:x1][:, ::-1]
+    return out
+
+
+def pair_rig(topside_at: list[float]) -> Rig:
+    """1 m markers: DICT_4X4_1000's 8 on the jacket at the origin, 9 on the topside at topside_at (jacket frame)."""
+    return Rig(dictionary="DICT_4X4_1000", marker_size=1.0, markers=[
         Marker(id=8, body="jacket", cone="A", face="astern", center=[0.0, 0.0, 0.0]),
-        Marker(id=9, body="topside", cone="A", face="astern", center=[0.0, 0.0, 0.08])])
-    assert mirror_ambiguous(rig) == {8, 9}
+        Marker(id=9, body="topside", cone="A", face="astern", center=topside_at)])
+
+
+def pair_image(rig: Rig, T_jacket_topside: np.ndarray) -> tuple[np.ndarray, list[PlacedMarker]]:
+    """The pair square on to the camera 15 m off (53 px a marker), the topside displaced by T_jacket_topside."""
+    jacket = placements(rig, distance=15.0)[0]
+    T_camera_body = jacket.T_camera_marker @ np.linalg.inv(rig.markers[0].T_body_marker)
+    topside = PlacedMarker(9, T_camera_body @ T_jacket_topside @ rig.markers[1].T_body_marker, 1.0)
+    return render(K, DIST, SIZE, [jacket, topside], DICT), [jacket, topside]
+
+
+@pytest.mark.parametrize("topside_at", [[0.0, 0.0, 3.5], [-3.0, 0.0, 3.0]], ids=["above", "diagonal"])
+def test_a_pair_of_self_mirroring_markers_confirms_itself_where_a_mirror_would_not(topside_at: list[float]) -> None:
+    """A camera that sees only a pair of self-mirroring markers (8 on the jacket, 9 on the topside above it or
+    diagonally off it: both read as themselves in a mirror, turned a quarter turn) keeps both, mated and hovering 2 m
+    above, 0.5 m sideways; every mirror image of the pair (each plate flipped where it is, the region flipped left to
+    right, or upside down) is dropped: it puts 9 a quarter turn round from where any set-down would."""
+    rig = pair_rig(topside_at)
+    ambiguous = mirror_ambiguous(rig)
+    assert ambiguous == {8, 9}
     turns = mirror_turns(rig)
     assert set(turns) == {8, 9} and abs(np.linalg.det(turns[8])) == 1.0 and turns[8][0, 0] == 0.0  # a quarter turn
     camera = CameraModel(K, DIST, *SIZE)
-    jacket = placements(rig)[0]
-    T_camera_body = jacket.T_camera_marker @ np.linalg.inv(rig.markers[0].T_body_marker)
-    for lift in ([0.0, 0.0, 0.0], [0.01, 0.0, 0.02]):
+    for lift in ([0.0, 0.0, 0.0], [0.5, 0.0, 2.0]):
         T_jacket_topside = np.eye(4)
         T_jacket_topside[:3, 3] = lift
-        topside = PlacedMarker(9, T_camera_body @ T_jacket_topside @ rig.markers[1].T_body_marker, SIDE)
-        image = render(K, DIST, SIZE, [jacket, topside], DICT)
+        image, (jacket, topside) = pair_image(rig, T_jacket_topside)
         seen = poses_of(rig, image)
         assert set(seen) == {8, 9}
-        assert drop_mirrored(seen, rig.marker_by_id, mirror_ambiguous(rig), SIDE, camera) == ({}, [8, 9])  # alone
-        kept, dropped = drop_mirrored(seen, rig.marker_by_id, mirror_ambiguous(rig), SIDE, camera, turns)
+        assert drop_mirrored(seen, rig.marker_by_id, ambiguous, 1.0, camera) == ({}, [8, 9])  # without the turns
+        kept, dropped = drop_mirrored(seen, rig.marker_by_id, ambiguous, 1.0, camera, turns)
         assert set(kept) == {8, 9} and dropped == []
-        mirror = poses_of(rig, mirrored(mirrored(image, jacket), topside))
-        assert set(mirror) == {8, 9}
-        kept, dropped = drop_mirrored(mirror, rig.marker_by_id, mirror_ambiguous(rig), SIDE, camera, turns)
-        assert kept == {} and dropped == [8, 9]
+        for mirror in (mirrored(mirrored(image, jacket), topside), reflected(image, [jacket, topside]),
+                       reflected(image, [jacket, topside], upside_down=True)):
+            poses = poses_of(rig, mirror)
+            assert set(poses) == {8, 9}
+            assert drop_mirrored(poses, rig.marker_by_id, ambiguous, 1.0, camera, turns) == ({}, [8, 9])
+
+
+def test_a_pair_whose_mirror_image_reads_as_the_pair_confirms_nothing() -> None:
+    """9 diagonally off 8 the other way, (-1, 1) in 8's frame: a left-right mirror turned a quarter turn maps that
+    diagonal onto itself, so the pair's mirror image would read exactly as the pair: it stays dropped."""
+    rig = pair_rig([3.0, 0.0, 3.0])
+    image, _ = pair_image(rig, np.eye(4))
+    seen = poses_of(rig, image)
+    assert set(seen) == {8, 9}
+    assert drop_mirrored(seen, rig.marker_by_id, mirror_ambiguous(rig), 1.0, CameraModel(K, DIST, *SIZE),
+                         mirror_turns(rig)) == ({}, [8, 9])
+
+
+def test_a_pair_a_mirror_explains_better_than_a_set_down_confirms_nothing() -> None:
+    """The topside 6 m sideways of its cone: under the set-down prior the pair's vector is likelier a mirror's of a
+    topside 3.5 m sideways and 2.5 m up (χ² 12.9) than the rig's (36), so the camera waits for it to come in."""
+    rig = pair_rig([0.0, 0.0, 3.5])
+    T_jacket_topside = np.eye(4)
+    T_jacket_topside[:3, 3] = [6.0, 0.0, 0.0]
+    seen = poses_of(rig, pair_image(rig, T_jacket_topside)[0])
+    assert set(seen) == {8, 9}
+    assert drop_mirrored(seen, rig.marker_by_id, mirror_ambiguous(rig), 1.0, CameraModel(K, DIST, *SIZE),
+                         mirror_turns(rig)) == ({}, [8, 9])
 
 
 def test_a_mirror_turn_is_learnt_from_the_dictionary() -> None:
