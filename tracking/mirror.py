@@ -212,8 +212,11 @@ def drop_mirrored(poses: dict[int, MarkerPose], markers: Mapping[int, Marker], a
                if not confirmed(poses[i], poses, markers, ambiguous, size, camera)
                and not confirmed_by_other_body(poses[i], poses, markers, ambiguous, size)]
     if turns:
-        pairs = [(i, j) for i in dropped for j in dropped if i != j and i in turns and j in turns]
-        mutual = {k for i, j in pairs if confirmed_by_each_other(poses[i], poses[j], markers, turns, size, camera)
-                  for k in (i, j)}
+        pairs = [(i, j) for i in dropped for j in dropped if i < j and i in turns and j in turns]
+        mutual: set[int] = set()
+        for i, j in pairs:  # either way round: each reads the pair in its first marker's frame
+            if confirmed_by_each_other(poses[i], poses[j], markers, turns, size, camera) or \
+                    confirmed_by_each_other(poses[j], poses[i], markers, turns, size, camera):
+                mutual |= {i, j}
         dropped = [i for i in dropped if i not in mutual]
     return {i: p for i, p in poses.items() if i not in dropped}, dropped
