@@ -56,6 +56,7 @@ def test_the_guide_runs_from_photos_to_a_verified_archive(example: Path) -> None
     assert {p.name for p in (example / "calibration").iterdir()} == {"stern_A.yaml", "drone_A.yaml", "drone_D1.yaml"}
     offsets = pd.read_csv(example / "offsets.csv")
     assert set(offsets["cone"]) == {"A", "B", "C", "D"}
-    shown = offsets.dropna(subset=["dx"])
-    assert len(shown) > 0.4 * len(offsets)
+    shown = offsets.groupby("cone")["dx"].apply(lambda dx: dx.notna().mean())
+    assert shown["A"] > 0.9 and shown["D"] > 0.3  # A by two cameras, D by one drone; B and C are blind, as check said
+    assert offsets.loc[offsets["dx"].isna(), "withheld"].notna().all()  # every row not shown says why
     assert (example / "run.mcap").is_file()

@@ -39,7 +39,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
-import cv2
 import numpy as np
 
 from tracking.camera import CameraModel
@@ -295,14 +294,9 @@ def run_cameras(rig: Rig, seconds: float, refinement: Refinement = DEFAULT_REFIN
 
 # --- what each camera sees, and its clock ---------------------------------------------------------------------------
 
-def code_cells(rig: Rig) -> int:
-    """Cells along a marker's side: its code and the black border."""
-    return int(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, rig.dictionary)).markerSize) + 2
-
-
 def marker_sights(rig: Rig, camera: str, results: list[FrameResult]) -> list[MarkerSight]:
     """Per rig marker the camera detected: frames, median distance, angle, pixels per cell, reprojection error."""
-    cells = code_cells(rig)
+    cells = rig.code_cells
     per: dict[int, list[tuple[float, float, float, float]]] = {}
     for r in results:
         for i, pose in r.poses.items():

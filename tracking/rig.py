@@ -30,7 +30,7 @@ place it is not applied, and is reported (tracking.estimator, `topside check`).
 from __future__ import annotations
 
 import re
-from functools import cached_property, lru_cache
+from functools import cache, cached_property, lru_cache
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -395,6 +395,11 @@ class Rig(_Model):
         return None if marker.reference else self.survey_sigma
 
     @property
+    def code_cells(self) -> int:
+        """Cells along a marker's side: its code and the black border."""
+        return dictionary_cells(self.dictionary)
+
+    @property
     def marker_by_id(self) -> dict[int, Marker]:
         """Markers keyed by id."""
         return {m.id: m for m in self.markers}
@@ -435,6 +440,13 @@ class Rig(_Model):
         """A path from the rig file, relative to the rig file's folder."""
         p = Path(relative)
         return p if p.is_absolute() else self.base_dir / p
+
+
+@cache
+def dictionary_cells(name: str) -> int:
+    """Cells along a side of a predefined ArUco dictionary's markers (DICT_6X6_250: 8), its black border's two
+    included."""
+    return int(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)).markerSize) + 2
 
 
 def dictionary_size(name: str) -> int:

@@ -24,7 +24,11 @@ stays: the sub-pixel phase of its edges, the blur of its own data cells into the
 of a still picture do not change from frame to frame. Each view (camera, marker) therefore has 8 bias states, one
 per corner coordinate, which renew as the marker's image moves (VIEW_BIAS_RENEW_PX). A still camera's view of a
 still jacket marker then tells the filter its pose to the bias's σ, however long it looks, instead of averaging
-a fixed error away as if it were noise (evidence in docs/method.md#fusion-the-default).
+a fixed error away as if it were noise (evidence in docs/method.md#fusion-the-default). Part of the error stays
+wherever the image goes, as long as it keeps its shape: the plate's edge and what lies beyond it, the code cells
+beside the border, the blur across a cell. So each view has 8 more, which renew as its image's shape changes
+(VIEW_SHAPE_BIAS_PX, VIEW_SHAPE_RENEW): a far stern camera following a topside across its picture for minutes
+averages the first part away, not the second.
 
 What the rig states but footage is not trusted to tell widens σ rather than hiding in it. Each marker's survey
 error (survey_sigma) is a consider state (ConsiderStates): never estimated, its prior kept, its cross-covariance

@@ -77,7 +77,7 @@ class TopsideFilter(FilterState):
             if cam.T_jacket_camera is not None:
                 psds[1 + k] = camera_psds(self.tuning, cam.mount, cam.motion_scale)
         noise = block_noises(dt, psds)
-        bodies = Transition(a, b, noise, np.ones(self.size - self.body_size))
+        bodies = Transition(a, b, noise, np.ones(self.size - self.body_size), self.renewal)
         self.x = bodies.apply(self.x[:, None])[:, 0]
         self.P = bodies.covariance(self.P)
         self.fold_cameras()
@@ -85,7 +85,7 @@ class TopsideFilter(FilterState):
         observations = [o for o in frame if isinstance(o, BodyObservation)]
         keep = renew(self, observations)
         self._jolts(observations, noise, dt)
-        return Transition(a, b, noise, keep)
+        return Transition(a, b, noise, keep, self.renewal)
 
     def _jolts(self, observations: list[BodyObservation], noise: np.ndarray, dt: float) -> None:
         """A camera whose jacket corners in this frame say it moved beyond its prior (measurements.jolted) gets its

@@ -2,9 +2,11 @@
 
 A marker's four undistorted corners (8 ideal pixels) are predicted through T_camera_jacket (jacket markers) or
 T_camera_jacket · T_jacket_topside (topside markers), the marker turned and moved by its survey error (consider
-states), plus its view's bias (8 states per (camera, marker)). Their Jacobian is analytic, over the state entries
-they depend on. Corners far off are down-weighted (Huber-like, CORNER_HUBER_CHI2), a marker's corners gated by their
-Mahalanobis distance (CORNER_GATE_CHI2). A view's bias renews as its marker's image moves.
+states), plus its view's bias (per corner coordinate of each (camera, marker), the sum of two states). Their Jacobian
+is analytic, over the state entries they depend on. Corners far off are down-weighted (Huber-like, CORNER_HUBER_CHI2),
+a marker's corners gated by their Mahalanobis distance (CORNER_GATE_CHI2). A view's bias renews in two parts: one as
+its marker's image travels (the pixels it falls on), one as the image's shape changes (what the marker's edges look
+like: how near, how turned, what lies beyond the plate).
 
 A pair offset (topside marker S displaced from its mated position, jacket frame) is, to first order in ω,
 o = (R - I) r_S + t ≈ t - [r_S]× ω: linear in the state (point_offset_matrix).
@@ -31,15 +33,17 @@ from tracking.estimator.noise import (
     LINEARISATION_TOL_PX,
     STATE,
     VIEW,
-    VIEW_BIAS_PX,
     VIEW_BIAS_RENEW_PX,
     VIEW_BIAS_TAU_S,
+    VIEW_SHAPE_RENEW,
+    VIEW_STATES,
 )
 from tracking.estimator.state import (
     CameraState,
     FilterState,
     ViewBias,
     camera_pose,
+    centred,
     point_offset_matrix,
     topside_pose,
 )
@@ -87,7 +91,13 @@ def predict_corners(s: FilterState, nominal: np.ndarray, index: int, marker: int
     return (uv[:, :2] / uv[:, 2:3]).reshape(-1)
 
 
-_EYE8 = np.eye(VIEW)  # a view's bias enters its corners one to one (read only)
+_EYE8 = np.eye(VIEW)  # (read only)
+_BIAS = np.hstack([_EYE8, _EYE8])  # (8, VIEW_STATES) a view's two biases enter its corners one to one (read only)
+
+
+def bias(x: np.ndarray, index: int) -> np.ndarray:
+    """(8,) the bias of a view's corners in a state x (n,), its states from index: the sum of its two parts."""
+    return x[index:index + VIEW] + x[index + VIEW:index + VIEW_STATES]
 _UNIT = np.repeat(np.eye(3)[:, None, :], 4, axis=1)  # (3, 4, 3) ∂(corner + δ)/∂δ_k of four corners: [k, n] = e_k
 
 
@@ -155,23 +165,27 @@ def renew(s: FilterState, frame: list[BodyObservation]) -> np.ndarray:
     nb = s.body_size
     keep = np.ones(s.size - nb)
     for o in frame:
-        for v, share in _renewed(s, o):
-            keep[v.index - nb:v.index - nb + VIEW] = share
+        for v, by_travel, by_shape in _renewed(s, o):
+            keep[v.index - nb:v.index - nb + VIEW] = by_travel
+            keep[v.index - nb + VIEW:v.index - nb + VIEW_STATES] = by_shape
     d = np.flatnonzero(keep < 1.0)
     if d.size:  # as Transition.covariance does for the views, in place (predict and apply leave arrays that nothing
         k = keep[d]  # else holds), on the renewed views' rows and columns alone (the rest keep all)
+        renewal = s.renewal[d]
         d += nb
         s.x[d] *= k
         s.P[d, :] *= k[:, None]
         s.P[:, d] *= k
-        s.P[d, d] += (1.0 - k**2) * VIEW_BIAS_PX**2
+        s.P[d, d] += (1.0 - k**2) * renewal
     return keep
 
 
-def _renewed(s: FilterState, o: BodyObservation) -> list[tuple[ViewBias, float]]:
-    """The views of a camera frame not yet renewed for it, each with the share of its bias that stays: exp(-travel /
-    VIEW_BIAS_RENEW_PX), travel the mean shift of its marker's predicted corners since its last frame, but at least
-    exp(-dt / VIEW_BIAS_TAU_S), dt the time since then."""
+def _renewed(s: FilterState, o: BodyObservation) -> list[tuple[ViewBias, float, float]]:
+    """The views of a camera frame not yet renewed for it, each with the shares of its two biases that stay.
+    The travel's: exp(-travel / VIEW_BIAS_RENEW_PX), travel the mean shift of its marker's predicted corners since its
+    last frame, but at least exp(-dt / VIEW_BIAS_TAU_S), dt the time since then. The shape's (shape_kept): by how much
+    further the image's shape departs from the one it had when last renewed, so a shape that only trembles about one
+    renews it once."""
     cam = s.cameras.get(o.camera)
     if cam is None or cam.T_jacket_camera is None:
         return []
@@ -187,9 +201,24 @@ def _renewed(s: FilterState, o: BodyObservation) -> list[tuple[ViewBias, float]]
         shift = (h - v.corners).reshape(4, 2)
         travel = float(np.sqrt((shift * shift).sum(axis=1)).sum()) / 4  # mean of the corners' shifts, px
         by_travel, by_time = np.exp(-travel / VIEW_BIAS_RENEW_PX), np.exp(-(o.time - v.time) / VIEW_BIAS_TAU_S)
+        by_shape = shape_kept(v, h)
         v.corners, v.time = h, o.time
-        out.append((v, float(max(by_travel, by_time))))
+        out.append((v, float(max(by_travel, by_time)), by_shape))
     return out
+
+
+def shape_kept(v: ViewBias, corners: np.ndarray) -> float:
+    """The share of a view's shape bias that stays as its marker's corners come to corners (8,) (ideal pixels):
+    exp(-growth / VIEW_SHAPE_RENEW), growth how much further the corners about their centre depart from the view's
+    shape than they did since it was kept (RMS over the corners, over the shape's RMS size). Where the departure
+    reaches VIEW_SHAPE_RENEW the view keeps these corners' shape instead."""
+    c = centred(corners)
+    departure = float(np.sqrt(np.sum((c - v.shape) ** 2) / max(float(np.sum(v.shape**2)), 1e-12)))
+    growth = max(0.0, departure - v.departure)
+    v.departure = max(v.departure, departure)
+    if v.departure >= VIEW_SHAPE_RENEW:
+        v.shape, v.departure = c, 0.0
+    return float(np.exp(-growth / VIEW_SHAPE_RENEW))
 
 
 def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray, topside: bool,
@@ -253,9 +282,9 @@ def _rows(s: FilterState, cam: CameraState, marker: int, z: np.ndarray, K: np.nd
     i = s.consider.markers.get(marker)
     cols = columns if i is None else [*columns, *range(i, i + 6)]
     h, J = corner_jacobian(s, placed(cam), cam.index, marker, x, K, cols)
-    idx = [*cols, *range(v, v + VIEW)]
-    H = np.concatenate((J, _EYE8), axis=1)  # (8, |idx|)
-    y = z.reshape(-1) - h - x[v:v + VIEW]
+    idx = [*cols, *range(v, v + VIEW_STATES)]
+    H = np.concatenate((J, _BIAS), axis=1)  # (8, |idx|)
+    y = z.reshape(-1) - h - bias(x, v)
     if x is not x0:
         y = y + H @ (x[idx] - x0[idx])
     HPH = H @ P0.take(idx, 0).take(idx, 1) @ H.T  # P0[np.ix_(idx, idx)], 2.5 times faster
@@ -281,7 +310,7 @@ def _linearisation_error(s: FilterState, cam: CameraState, rows: list[_Rows], K:
     each marker's rows were taken at (the bias states enter linearly: left out)."""
     worst = 0.0
     for r in rows:
-        n_pose = len(r.idx) - VIEW
+        n_pose = len(r.idx) - VIEW_STATES
         dx = s.x[r.idx[:n_pose]] - r.x[r.idx[:n_pose]]
         linear = r.h + r.H[:, :n_pose] @ dx
         worst = max(worst, float(np.abs(predict_corners(s, placed(cam), cam.index, r.marker, s.x, K) - linear).max()))
@@ -297,7 +326,7 @@ def jolted(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: 
     views = {m: s.views[(cam.name, m)] for m in corners if (cam.name, m) in s.views}
     predicted = {m: v.corners if v.time == time else predict_corners(s, placed(cam), cam.index, m, s.x, K)
                  for m, v in views.items()}  # renew predicted the frame's views' corners already
-    bound = [np.sum((z.reshape(4, 2) - (predicted[m] + s.x[views[m].index:views[m].index + VIEW]).reshape(4, 2)) ** 2,
+    bound = [np.sum((z.reshape(4, 2) - (predicted[m] + bias(s.x, views[m].index)).reshape(4, 2)) ** 2,
                     axis=1) for m, z in corners.items() if m in views]  # |y|² per corner: d² ≤ |y|² / σ², S ≥ σ² I
     if not bound or _median(np.concatenate(bound)) <= JOLT_CHI2_2 * sigma2:
         return False
@@ -305,9 +334,9 @@ def jolted(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: 
     for marker, v in views.items():
         z = corners[marker]
         h, J = corner_jacobian(s, placed(cam), cam.index, marker, s.x, K, columns)
-        idx = [*columns, *range(v.index, v.index + VIEW)]
-        H = np.concatenate((J, _EYE8), axis=1)
-        y = z.reshape(-1) - h - s.x[v.index:v.index + VIEW]
+        idx = [*columns, *range(v.index, v.index + VIEW_STATES)]
+        H = np.concatenate((J, _BIAS), axis=1)
+        y = z.reshape(-1) - h - bias(s.x, v.index)
         d2.append(corner_d2(H @ s.P.take(idx, 0).take(idx, 1) @ H.T + sigma2 * _EYE8, y))
     return bool(d2) and _median(np.concatenate(d2)) > JOLT_CHI2_2
 

@@ -31,7 +31,7 @@ REPORT_WARMUP_SIGMA_SIDES = 0.025  # this many marker sides (25 mm for 1 m marke
 SMOOTHER_SPAN_S = 30.0  # recorded runs are smoothed this much at a time, each time with SMOOTHER_LAG_S of the
 SMOOTHER_LAG_S = 45.0  # future after it: memory holds both, not the whole run; a still camera gains from the far future
 CORNER_NOISE_PX = 0.15  # σ of a corner coordinate from frame to frame (edge-fit corners in fog and rain: 0.1 px median)
-VIEW = 8  # bias states per view (camera, marker): one per corner coordinate
+VIEW = 8  # corner coordinates of a view (camera, marker): each has two bias states (VIEW_STATES)
 CORNER_NOISE_SAMPLES = 30  # body fits whose median measures a camera's corner noise (CornerNoise): 2-5 s of frames
 CORNER_NOISE_MIN_SAMPLES = 3  # fewer fits than this measure nothing: CORNER_NOISE_PX until then
 VIEW_BIAS_PX = 0.08  # σ of the part of a corner's error that stays while its marker's image stays
@@ -39,6 +39,19 @@ VIEW_BIAS_RENEW_PX = 0.5  # that part renews as the marker's image moves: exp(-t
 # frame of the view to the next (travel: the mean shift of its predicted corners, the filter's own corrections included)
 VIEW_BIAS_TAU_S = 0.5  # ... but no faster than with this time constant, however far the image travels (a drone's
 # marker cells and the stream's coding move with the marker, not the pixel grid)
+VIEW_SHAPE_BIAS_PX = 0.04  # σ of the part of a corner's error that stays while its marker's image keeps its shape,
+# wherever the image goes (the plate's edge and what lies beyond it, the code cells beside the border, the blur across
+# a cell): over 796 views of 114 random installations a view's whole-run mean error is 0.016 px at the median and
+# 0.045 px RMS (0.044 where the marker moves), up to 0.5 px where a plate's edge meets a dark leg
+# (benchmarks/results/corner_persistence.md). It grows as a cell thins across (0.14 px RMS at 2 px, 0.03 from 4.5 px),
+# but a filter given that much at a far camera's 2 px cells lost its depth (docs/method.md): one σ for all
+VIEW_SHAPE_RENEW = 0.1  # that part renews as its image's shape changes: exp(-change / this) of it stays, change the
+# growth of the image's departure from the shape it had when last renewed, over its size (a tenth: 10 % nearer, or
+# turned 0.1 rad in the image); a shape that only trembles about one (a hovering drone) renews it once
+VIEW_STATES = 2 * VIEW  # bias states per view: the part that renews with travel, then the part that renews with shape
+
+VIEW_PRIOR = np.array([VIEW_BIAS_PX**2] * VIEW + [VIEW_SHAPE_BIAS_PX**2] * VIEW)  # (VIEW_STATES,) their variances
+VIEW_PRIOR.flags.writeable = False
 CORNER_HUBER_CHI2 = 5.99  # 2 degrees of freedom, 95 %: beyond it a corner's variance grows with its residual (rain's
 # heavy tail)
 CAMERA_RATE_TAU_S = 0.5  # a camera's rates revert to zero with this time constant: a drone's jitter and a vessel's

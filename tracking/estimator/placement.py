@@ -31,6 +31,7 @@ from tracking.estimator.noise import (
     SURVEY_GATE_CHI2,
     TOPSIDE_PLACEMENT_M,
     VIEW_BIAS_PX,
+    VIEW_SHAPE_BIAS_PX,
     fits_its_corners,
     prior_covariance,
 )
@@ -139,7 +140,7 @@ def _option_fits(s: FilterState, cam: CameraState, o: BodyObservation, candidate
                  topside: list[int]) -> tuple[list[float], list[float]]:
     """Per option, the χ² of the frame's jacket corners through it; per candidate (the options, then the pose between
     them), the topside's corners' Mahalanobis distance through it (nan without topside corners)."""
-    sigma2 = CORNER_NOISE_PX**2 + VIEW_BIAS_PX**2  # a corner's error in one frame, noise and view bias
+    sigma2 = CORNER_NOISE_PX**2 + VIEW_BIAS_PX**2 + VIEW_SHAPE_BIAS_PX**2  # a corner's error in one frame
     zero = s.x.copy()  # the camera's error zero: its nominal pose is the candidate's
     zero[cam.index:cam.index + 6] = 0.0
     jacket = [i for i in o.corners if i in s.jacket_corners]

@@ -3,8 +3,9 @@
 Per body (the topside, each camera) the state holds a pose error and its rates. Over dt the pose gains b × rate and
 the rate keeps a share a of itself: the topside keeps its speed (a = 1, b = dt), a camera's rates revert to zero
 within CAMERA_RATE_TAU_S. The states after the bodies (consider states, view biases) keep a share of themselves, the
-rest renewed with VIEW_BIAS_PX. A camera's process noise follows the motion its jacket markers' images show
-(CameraMotionLevel), or its fitted jacket poses' turns where they are measured well enough (PoseMotionLevel).
+rest renewed with their prior (estimator.noise.VIEW_PRIOR). A camera's process noise follows the motion its jacket
+markers' images show (CameraMotionLevel), or its fitted jacket poses' turns where they are measured well enough
+(PoseMotionLevel).
 """
 
 from __future__ import annotations
@@ -24,7 +25,6 @@ from tracking.estimator.noise import (
     POSE_MOTION_LAG_S,
     POSE_MOTION_SNR,
     STATE,
-    VIEW_BIAS_PX,
 )
 from tracking.geometry import rotvec
 
@@ -63,14 +63,15 @@ class Transition:
     """One prediction of the state (n,): bodies first (12 each), then consider states and view biases.
 
     Per body, its rates' decay a (B, 6), their weight b (B, 6) on the pose and its process noise (B, 12, 12); per
-    state after the bodies, the share of it that stays (V,), the rest renewed with VIEW_BIAS_PX (consider states:
-    all of it stays).
+    state after the bodies, the share of it that stays (V,), the rest renewed with the variance renewal (V,)
+    (consider states: all of it stays).
     """
 
     a: np.ndarray
     b: np.ndarray
     noise: np.ndarray
     keep: np.ndarray
+    renewal: np.ndarray
 
     def apply(self, M: np.ndarray) -> np.ndarray:
         """F M for M (n, k)."""
@@ -89,7 +90,7 @@ class Transition:
             nb = self.a.size * 2
             out[:, nb:] *= self.keep[None, :]
             d = np.arange(nb, len(out))
-            out[d, d] += (1.0 - self.keep**2) * VIEW_BIAS_PX**2
+            out[d, d] += (1.0 - self.keep**2) * self.renewal
         return out
 
 

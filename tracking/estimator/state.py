@@ -2,9 +2,10 @@
 
 x holds, in order: the topside (12: translation t and small rotation ω of the topside frame in the jacket frame, then
 their rates); every camera of the rig (12 each: its pose error (δθ, δp) about a nominal T_jacket_camera, jacket frame,
-then its rates); the markers' survey errors as consider states (ConsiderStates); then the views' corner biases (8 per
-(camera, marker), appended as views first appear). A camera's nominal pose absorbs its error at every prediction
-(FilterState.fold_cameras), so within a step every error is about the predicted nominal.
+then its rates); the markers' survey errors as consider states (ConsiderStates); then the views' corner biases (16 per
+(camera, marker), appended as views first appear: 8 that renew as the marker's image travels, 8 as its shape
+changes). A camera's nominal pose absorbs its error at every prediction (FilterState.fold_cameras), so within a step
+every error is about the predicted nominal.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from scipy.linalg.lapack import dtrtrs
 from threadpoolctl import threadpool_limits
 
 from tracking.estimator.hypotheses import Hypotheses
-from tracking.estimator.noise import STATE, VIEW, VIEW_BIAS_PX, CornerNoise, FilterTuning, prior_covariance
+from tracking.estimator.noise import STATE, VIEW_PRIOR, VIEW_STATES, CornerNoise, FilterTuning, prior_covariance
 from tracking.estimator.process import CameraMotionLevel, PoseMotionLevel
 from tracking.geometry import rotation, skew
 from tracking.offsets import body_geometry
@@ -51,12 +52,24 @@ def point_offset_matrix(r: np.ndarray) -> np.ndarray:
 
 @dataclass
 class ViewBias:
-    """The persistent corner errors of one marker seen by one camera: where their 8 states sit, and the marker's corners
-    (8,) predicted at its last frame (ideal pixels), from which the next frame's image travel is measured."""
+    """The persistent corner errors of one marker seen by one camera: where their VIEW_STATES states sit, the marker's
+    corners (8,) predicted at its last frame (ideal pixels), from which the next frame's image travel is measured, and
+    the shape its image had when the shape's part was last renewed, from which the shape's change is measured."""
 
     index: int
     corners: np.ndarray
     time: float
+    shape: np.ndarray = field(init=False)  # (4, 2) the corners about their centre then, px
+    departure: float = 0.0  # the largest departure from that shape since, over its size
+
+    def __post_init__(self) -> None:
+        self.shape = centred(self.corners)
+
+
+def centred(corners: np.ndarray) -> np.ndarray:
+    """(4, 2) a marker's corners (8,) about their centre."""
+    c = corners.reshape(4, 2)
+    return c - c.mean(axis=0)
 
 
 NOT_SEEN = "no rig marker in any of its frames"  # why a camera is not placed that the filter never had a frame of (it
@@ -182,6 +195,8 @@ class FilterState:
     body_size: int = field(init=False)  # entries of the bodies: the topside's and the cameras'
     consider: ConsiderStates = field(init=False)  # after the bodies; view biases after them
     views: dict[tuple[str, int], ViewBias] = field(init=False)  # (camera, marker) -> its bias states
+    renewal: np.ndarray = field(init=False)  # (n - body_size,) variance a state after the bodies is renewed with (its
+    # prior; consider states are never renewed)
     topside_placed: bool = field(default=False, init=False)
     placed_at: float | None = field(default=None, init=False)  # capture time the topside was (last) placed, or
     # first measured
@@ -215,6 +230,7 @@ class FilterState:
         self.consider = ConsiderStates.of(self.rig, self.body_size)
         self.views = {}
         n = self.consider.indices.stop
+        self.renewal = np.zeros(n - self.body_size)
         self.x = np.zeros(n)
         self.P = np.zeros((n, n))
         self.P[:STATE, :STATE] = prior_covariance(self.tuning)
@@ -264,22 +280,24 @@ class FilterState:
 
     def forget_view(self, view: ViewBias) -> None:
         """A view's bias states back to their prior, decoupled from the rest."""
-        v = slice(view.index, view.index + VIEW)
+        v = slice(view.index, view.index + VIEW_STATES)
         self.P[v, :] = 0.0
         self.P[:, v] = 0.0
-        self.P[v, v] = VIEW_BIAS_PX**2 * np.eye(VIEW)
+        self.P[v, v] = np.diag(VIEW_PRIOR)
         self.x[v] = 0.0
 
     def append_view(self, key: tuple[str, int], corners: np.ndarray, time: float) -> ViewBias:
         """A new view's bias states appended to the state with their prior; its marker's corners (8,) predicted now."""
         n = self.size
-        self.x = np.concatenate([self.x, np.zeros(VIEW)])
-        P = np.zeros((n + VIEW, n + VIEW))
+        view = ViewBias(n, corners, time)
+        self.x = np.concatenate([self.x, np.zeros(VIEW_STATES)])
+        P = np.zeros((n + VIEW_STATES, n + VIEW_STATES))
         P[:n, :n] = self.P
-        P[n:, n:] = VIEW_BIAS_PX**2 * np.eye(VIEW)
+        P[n:, n:] = np.diag(VIEW_PRIOR)
         self.P = P
-        self.views[key] = ViewBias(n, corners, time)
-        return self.views[key]
+        self.renewal = np.concatenate([self.renewal, VIEW_PRIOR])  # a new array: transitions hold the old
+        self.views[key] = view
+        return view
 
     def fold_cameras(self) -> None:
         """Move the cameras' pose errors (and the motion their rates imply) into their nominal poses.
