@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pandas as pd
 
@@ -31,7 +30,7 @@ from benchmarks.accuracy import detect, detections_cache
 from benchmarks.campaign import CACHE, parse_seeds
 from tracking.estimator.noise import VIEW_BIAS_PX, VIEW_SHAPE_BIAS_PX
 from tracking.outputs import write_text
-from tracking.rig import load_rig
+from tracking.rig import dictionary_cells, load_rig
 
 RESULTS = Path(__file__).resolve().parent / "results" / "corner_persistence.md"
 GROSS_PX = 2.0  # a corner this far off its truth is a failed fit, not a bias
@@ -39,7 +38,7 @@ MIN_FRAMES = 30  # 2 s at 15 FPS
 WINDOW = 15  # frames of the running mean that splits the white part off (1 s at 15 FPS)
 STILL_PX = 0.05  # a view whose corners move less than this a frame (median) is still
 TAIL_PX = 0.3  # views whose persistent error exceeds this are listed one by one
-CELL_BINS = (0, 4, 5, 6, 8, 12, 20, 1000)  # px per code cell
+CELL_BINS = (0, 2.5, 3.5, 4.5, 6, 8, 12, 1000)  # px per code cell along the marker's shortest side
 FORESHORTENING_BINS = (0, 0.6, 0.8, 0.9, 1.01)  # shortest side over longest
 QUANTILES = (0.5, 0.68, 0.9, 0.95, 0.98)
 
@@ -47,7 +46,7 @@ QUANTILES = (0.5, 0.68, 0.9, 0.95, 0.98)
 def view_rows(scene: Path) -> list[dict]:
     """One row per view of an installation: its cells, foreshortening, motion, persistent and white error."""
     rig = load_rig(scene / "rig.yaml")
-    cells = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, rig.dictionary)).markerSize + 2
+    cells = dictionary_cells(rig.dictionary)
     mounts = {c.name: c.mount for c in rig.cameras}
     bodies = {m.id: m.body for m in rig.markers}
     truth = pd.read_csv(scene / "truth_frames.csv").dropna(subset=["marker_id"])
@@ -76,7 +75,7 @@ def view_rows(scene: Path) -> list[dict]:
         white = e[ok] - pd.DataFrame(e[ok]).rolling(WINDOW, center=True, min_periods=WINDOW // 2).mean().to_numpy()
         rows.append({"installation": scene.name, "camera": camera, "mount": mounts.get(camera, "?"), "marker": marker,
                      "body": bodies.get(marker, "?"), "frames": len(e), "gross": float(1 - ok.mean()),
-                     "cell_px": float(np.median(sides.mean(axis=1)) / cells),
+                     "cell_px": float(np.median(sides.min(axis=1)) / cells),  # along the shortest side, as the campaign
                      "foreshortening": float(np.median(sides.min(axis=1) / sides.max(axis=1))),
                      "travel_px": float(np.median(np.linalg.norm(np.diff(t, axis=0), axis=1)) / 2),
                      "persistent_px": float(np.sqrt(np.mean(e[ok].mean(axis=0) ** 2))),

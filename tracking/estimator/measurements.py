@@ -211,8 +211,12 @@ def shape_kept(v: ViewBias, corners: np.ndarray) -> float:
     """The share of a view's shape bias that stays as its marker's corners come to corners (8,) (ideal pixels):
     exp(-growth / VIEW_SHAPE_RENEW), growth how much further the corners about their centre depart from the view's
     shape than they did since it was kept (RMS over the corners, over the shape's RMS size). Where the departure
-    reaches VIEW_SHAPE_RENEW the view keeps these corners' shape instead."""
+    reaches VIEW_SHAPE_RENEW the view keeps these corners' shape instead. Corners that are not finite change nothing.
+    (A shape swinging by more than VIEW_SHAPE_RENEW about one, as a marker's image in a camera rolling 3-5° in waves,
+    renews the bias at every swing once a reset falls at one end: the travel's bias, in effect.)"""
     c = centred(corners)
+    if not np.isfinite(c).all():
+        return 1.0
     departure = float(np.sqrt(np.sum((c - v.shape) ** 2) / max(float(np.sum(v.shape**2)), 1e-12)))
     growth = max(0.0, departure - v.departure)
     v.departure = max(v.departure, departure)

@@ -43,11 +43,12 @@ VIEW_SHAPE_BIAS_PX = 0.04  # σ of the part of a corner's error that stays while
 # wherever the image goes (the plate's edge and what lies beyond it, the code cells beside the border, the blur across
 # a cell): over 796 views of 114 random installations a view's whole-run mean error is 0.016 px at the median and
 # 0.045 px RMS (0.044 where the marker moves), up to 0.5 px where a plate's edge meets a dark leg
-# (benchmarks/results/corner_persistence.md). It grows as a cell thins across (0.14 px RMS at 2 px, 0.03 from 4.5 px),
-# but a filter given that much at a far camera's 2 px cells lost its depth (docs/method.md): one σ for all
+# (benchmarks/results/corner_persistence.md). It grows as a cell thins across (0.13 px RMS under 2.5 px, 0.03 from
+# 4.5 px), but a filter given that much at a far camera's 2 px cells lost its depth (docs/method.md): one σ for all
 VIEW_SHAPE_RENEW = 0.1  # that part renews as its image's shape changes: exp(-change / this) of it stays, change the
-# growth of the image's departure from the shape it had when last renewed, over its size (a tenth: 10 % nearer, or
-# turned 0.1 rad in the image); a shape that only trembles about one (a hovering drone) renews it once
+# growth of the image's departure from the shape it had at the last reset (when the departure reached this), over its
+# size (a tenth: 10 % nearer, or turned 0.1 rad in the image); a shape that only trembles about one (a hovering drone)
+# renews it once, one swinging by more (a camera rolling 3-5° in waves) at every swing (measurements.shape_kept)
 VIEW_STATES = 2 * VIEW  # bias states per view: the part that renews with travel, then the part that renews with shape
 
 VIEW_PRIOR = np.array([VIEW_BIAS_PX**2] * VIEW + [VIEW_SHAPE_BIAS_PX**2] * VIEW)  # (VIEW_STATES,) their variances

@@ -54,12 +54,12 @@ def point_offset_matrix(r: np.ndarray) -> np.ndarray:
 class ViewBias:
     """The persistent corner errors of one marker seen by one camera: where their VIEW_STATES states sit, the marker's
     corners (8,) predicted at its last frame (ideal pixels), from which the next frame's image travel is measured, and
-    the shape its image had when the shape's part was last renewed, from which the shape's change is measured."""
+    the shape its image had when the shape's part was last reset, from which the shape's change is measured."""
 
     index: int
     corners: np.ndarray
     time: float
-    shape: np.ndarray = field(init=False)  # (4, 2) the corners about their centre then, px
+    shape: np.ndarray = field(init=False)  # (4, 2) the corners about their centre at the last reset, px
     departure: float = 0.0  # the largest departure from that shape since, over its size
 
     def __post_init__(self) -> None:
