@@ -721,7 +721,8 @@ def test_the_smoother_shows_no_more_than_the_live_filter_with_markers_at_one_con
         rows = [e for e in smoothed if e.cone == cone]
         shown = [e for e in rows if np.isfinite(e.offset).all()]
         assert all(np.isfinite(live[e.time, cone].offset).all() for e in shown)  # withheld where the live filter was
-        assert all(np.array_equal(e.covariance, live[e.time, cone].covariance) for e in rows)
+        assert all(np.allclose(e.covariance, live[e.time, cone].covariance, rtol=1e-5, atol=1e-8) for e in rows)  # the
+        # live filter's, as the smoother keeps it (in single precision: within (0.1 mm)²)
         if shown:
             err = np.array([e.offset - (one_cone_topside_T(e.time)[:3, :3] @ CONES[cone] + one_cone_topside_T(e.time)
                                         [:3, 3] - CONES[cone]) for e in shown])
