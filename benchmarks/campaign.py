@@ -34,7 +34,6 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pandas as pd
 
@@ -43,7 +42,7 @@ from tracking.estimator import TopsideFilter, filter_frame, smoothed_estimates
 from tracking.estimator.measurements import frames as _frames
 from tracking.evaluate import truth_at
 from tracking.pipeline import TrackStats
-from tracking.rig import load_rig
+from tracking.rig import dictionary_cells, load_rig
 
 REPO = Path(__file__).resolve().parents[1]
 CACHE = REPO / "benchmarks" / ".cache" / "campaign"
@@ -82,7 +81,7 @@ def render(seed: int) -> Path:
 def cell_px(scene: Path, dictionary: str) -> dict[tuple[str, int], float]:
     """(camera, marker) -> median pixels per code cell over the camera's frames (the marker's shortest side over its
     cells), from the simulator's true corners."""
-    cells = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)).markerSize + 2
+    cells = dictionary_cells(dictionary)
     rows = pd.read_csv(scene / "truth_frames.csv").dropna(subset=["marker_id"])
     rows = rows[rows["unoccluded"] >= 0.99]
     c = rows[[f"c{k}{a}" for k in range(4) for a in "xy"]].to_numpy().reshape(-1, 4, 2)
