@@ -887,3 +887,30 @@ def test_the_cameras_disagreement_floors_a_cones_sigma_and_their_comparison_hold
     assert {e.withheld for e in waiting} == {WITHHELD_COMPARING} and all(np.isnan(e.offset).all() for e in waiting)
     wide = kf.cone_estimates(kf.x, P, 0.0, (), warming=False, floors=(added * 100, np.ones(cones, dtype=bool)))
     assert {e.withheld for e in wide} == {WITHHELD_SIGMA}
+
+
+def test_the_transition_is_its_dense_matrix_and_renews_what_it_does_not_keep() -> None:
+    from tracking.estimator.process import Transition, rate_decay
+
+    rng = np.random.default_rng(3)
+    bodies, views = 2, 5
+    n = 12 * bodies + views
+    a_cam, b_cam = rate_decay(0.1, 0.5)
+    a, b = np.full((bodies, 6), a_cam), np.full((bodies, 6), b_cam)
+    a[0], b[0] = 1.0, 0.1
+    noise = np.stack([np.diag(rng.uniform(0.1, 1.0, 12)) for _ in range(bodies)])
+    keep, renewal = np.array([1.0, 0.3, 1.0, 0.0, 0.9]), rng.uniform(0.5, 2.0, views)
+    F = np.eye(n)
+    for k in range(bodies):
+        i = 12 * k + np.arange(6)
+        F[i, i + 6], F[i + 6, i + 6] = b[k], a[k]
+    F[12 * bodies:, 12 * bodies:] = np.diag(keep)
+    Q = np.zeros((n, n))
+    for k in range(bodies):
+        Q[12 * k:12 * (k + 1), 12 * k:12 * (k + 1)] = noise[k]
+    Q[12 * bodies:, 12 * bodies:] = np.diag((1 - keep**2) * renewal)
+    L = rng.normal(size=(n, n))
+    P = L @ L.T
+    t = Transition(a, b, noise, keep, renewal)
+    assert np.allclose(t.covariance(P), F @ P @ F.T + Q)
+    assert np.allclose(t.apply(P[:, :3]), F @ P[:, :3])

@@ -38,6 +38,7 @@ from tracking.estimator.noise import (
     VIEW_SHAPE_RENEW,
     VIEW_STATES,
 )
+from tracking.estimator.process import renew_states
 from tracking.estimator.state import (
     CameraState,
     FilterState,
@@ -169,14 +170,9 @@ def renew(s: FilterState, frame: list[BodyObservation]) -> np.ndarray:
             keep[v.index - nb:v.index - nb + VIEW] = by_travel
             keep[v.index - nb + VIEW:v.index - nb + VIEW_STATES] = by_shape
     d = np.flatnonzero(keep < 1.0)
-    if d.size:  # as Transition.covariance does for the views, in place (predict and apply leave arrays that nothing
-        k = keep[d]  # else holds), on the renewed views' rows and columns alone (the rest keep all)
-        renewal = s.renewal[d]
-        d += nb
-        s.x[d] *= k
-        s.P[d, :] *= k[:, None]
-        s.P[:, d] *= k
-        s.P[d, d] += (1.0 - k**2) * renewal
+    if d.size:  # in place (predict and apply leave arrays that nothing else holds), on the renewed views alone
+        s.x[d + nb] *= keep[d]
+        renew_states(s.P, d + nb, keep[d], s.renewal[d])
     return keep
 
 

@@ -82,16 +82,23 @@ class Transition:
 
     def covariance(self, P: np.ndarray) -> np.ndarray:
         """F P Fᵀ + Q for a covariance P (n, n)."""
-        out = self.apply(P)
+        out = _body_rows(P, self.a, self.b)
         _body_columns(out, self.a, self.b)
         for k, Q in enumerate(self.noise):
             out[STATE * k:STATE * (k + 1), STATE * k:STATE * (k + 1)] += Q
-        if (self.keep < 1.0).any():
-            nb = self.a.size * 2
-            out[:, nb:] *= self.keep[None, :]
-            d = np.arange(nb, len(out))
-            out[d, d] += (1.0 - self.keep**2) * self.renewal
+        d = np.flatnonzero(self.keep < 1.0)
+        if d.size:
+            renew_states(out, d + self.a.size * 2, self.keep[d], self.renewal[d])
         return out
+
+
+def renew_states(P: np.ndarray, d: np.ndarray, keep: np.ndarray, renewal: np.ndarray) -> None:
+    """In place on a covariance P (n, n): the states d (V,) keep the share keep (V,) of themselves, the rest renewed
+    with the variance renewal (V,): P <- K P K + (I - K²) renewal, K = keep on d and 1 elsewhere. The transition's
+    view part (Transition.covariance), and the filter's renewal of a frame's views (measurements.renew)."""
+    P[d, :] *= keep[:, None]
+    P[:, d] *= keep
+    P[d, d] += (1.0 - keep**2) * renewal
 
 
 @dataclass
