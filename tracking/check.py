@@ -53,6 +53,7 @@ from tracking.disagreements import (
 from tracking.errors import InputError
 from tracking.estimate import WITHHELD_BELOW, ConeEstimate, axes_withheld
 from tracking.estimator import TopsideFilter, cone_points, filter_frame, point_offset_matrix
+from tracking.estimator.filter import misread_warning
 from tracking.estimator.noise import MOUNT_MISMATCH, REPORT_MAX_SIGMA_M, STATE
 from tracking.estimator.state import topside_pose
 from tracking.images import Frame, VideoHealth
@@ -420,6 +421,12 @@ def depth_reason(e: ConeEstimate, cameras: tuple[str, ...], rig: Rig, cone: str)
             "measure that axis")
 
 
+def misread_markers(kf: TopsideFilter) -> list[str]:
+    """One line per view the filter found misread beyond its corners' prior (measurements.misread)."""
+    return [misread_warning(camera, marker, v.misread_px) for (camera, marker), v in sorted(kf.views.items())
+            if v.misread_px > 0.0]
+
+
 def mount_mismatch(kf: TopsideFilter, name: str) -> str:
     """What a camera's measured motion says of its rig mount (empty: nothing): a level MOUNT_MISMATCH times its
     mount's prior, and the first mount whose prior holds it (the filter follows the level either way)."""
@@ -471,7 +478,7 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
     omega = kf.x[3:6] if kf.x is not None and kf.topside_placed else np.zeros(3)
     readings = [r for name, run in runs.items() for r in cone_readings(rig, name, run.results, points, omega)]
     disagreements += cross_camera_disagreements(rig, readings)
-    warnings = [w for run in runs.values() for w in run.warnings]
+    warnings = [w for run in runs.values() for w in run.warnings] + misread_markers(kf)
     if not kf.scale.fixed:
         warnings.append(f"{rig.path}: marker_size: {kf.scale.message()}")
     below = {e.cone: float((point_offset_matrix(cone_points(rig)[e.cone]) @ kf.x[:STATE])[2]) for e in estimates

@@ -163,7 +163,8 @@ def fuse(rig: Rig, mode: str, measurements: Iterable[Measurement], segment: Segm
 
 def join_reports(reports: list[tuple[FilterReport, float]], below: int) -> FilterReport:
     """The run's FilterReport from its segments' (each with the share of its span it keeps): cameras never placed in
-    any, the size evidence summed by share, `below` rows withheld as through the cones at the deepest any found."""
+    any, the size evidence summed by share, `below` rows withheld as through the cones at the deepest any found, the
+    views any found misread (at the largest departure)."""
     out = FilterReport()
     if not reports:
         return out
@@ -182,6 +183,9 @@ def join_reports(reports: list[tuple[FilterReport, float]], below: int) -> Filte
     out.scale = scale
     deepest = min((r.below[1] for r, _ in reports if r.below[0]), default=0.0)
     out.below = (below, deepest) if below else (0, 0.0)
+    for r, _ in reports:
+        for key, px in r.misread.items():
+            out.misread[key] = max(px, out.misread.get(key, 0.0))
     return out
 
 

@@ -80,7 +80,8 @@ def print_track_outputs(rows: int, out: Path, rrd: Path | None, mcap: Path | Non
 def rig_findings(rig_path: Path, report: FilterReport, stats: TrackStats | None = None) -> None:
     """After a fused run: a rig error it found (the markers' size, the topside through its cones), which withheld the
     offsets, is one error line and exit status 2; else a warning each for the cameras never placed (with why: where
-    the filter had none of its frames, the markers it dropped as seen mirrored) and a scale nothing fixed."""
+    the filter had none of its frames, the markers it dropped as seen mirrored), a scale nothing fixed and each view it
+    found misread."""
     if report.scale.mismatch:
         raise InputError(rig_path, report.scale.message() + "; the offsets were withheld", "marker_size")
     if report.below[0]:
@@ -93,3 +94,7 @@ def rig_findings(rig_path: Path, report: FilterReport, stats: TrackStats | None 
                           markup=False)
     if not report.scale.fixed:
         err_console.print(f"topside: warning: {rig_path}: marker_size: {report.scale.message()}", markup=False)
+    from tracking.estimator.filter import misread_warning
+
+    for (camera, marker), px in sorted(report.misread.items()):
+        err_console.print(f"topside: warning: {misread_warning(camera, marker, px)}", markup=False)

@@ -336,18 +336,29 @@ class TopsideFilter(FilterState):
         return WITHHELD_COMPARING if comparing else ""
 
 
+def misread_warning(camera: str, marker: int, departure_px: float) -> str:
+    """A misread view's line: its camera, its marker and how far off one corner reads (twice the departure: one corner
+    of four off by δ departs δ/2)."""
+    return (f"{camera}: marker {marker}'s corners depart from a square's image by {departure_px:.2f} px all along "
+            f"(one corner about {2 * departure_px:.1f} px off: a shadow's or a plate's edge across it, dirt, a bent "
+            "plate, the lens model off there?); the filter trusts that view less")
+
+
 @dataclass
 class FilterReport:
     """What a run of the filter found besides its estimates, taken when the run ends: the cameras it never placed and
     why (each camera's CameraState.waiting), the markers' size against the rig's (tracking.scale), and the offsets it
-    withheld for putting the topside through its cones."""
+    withheld for putting the topside through its cones, and the views whose corners it found misread."""
 
     unplaced: dict[str, str] = field(default_factory=dict)
     scale: ScaleEvidence = field(default_factory=ScaleEvidence)
     below: tuple[int, float] = (0, 0.0)  # estimates withheld as the topside through its cones, and the deepest Δz, m
+    misread: dict[tuple[str, int], float] = field(default_factory=dict)  # (camera, marker) -> the departure, px, of
+    # each view found misread (measurements.misread)
 
     def take(self, kf: TopsideFilter) -> None:
         """The findings of a filter at the end of its run."""
         self.unplaced = {name: cam.waiting for name, cam in kf.cameras.items() if cam.placed_at is None}
         self.scale = kf.scale
         self.below = kf.below
+        self.misread = {key: v.misread_px for key, v in kf.views.items() if v.misread_px > 0.0}

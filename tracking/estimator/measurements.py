@@ -17,6 +17,7 @@ observation, when it has one, holds its pair offsets and replaces them (preferre
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
@@ -35,6 +36,9 @@ from tracking.estimator.noise import (
     VIEW,
     VIEW_BIAS_RENEW_PX,
     VIEW_BIAS_TAU_S,
+    VIEW_MISREAD_CHI2,
+    VIEW_MISREAD_GAIN,
+    VIEW_MISREAD_TAU_S,
     VIEW_SHAPE_RENEW,
     VIEW_STATES,
 )
@@ -221,6 +225,52 @@ def shape_kept(v: ViewBias, corners: np.ndarray) -> float:
     return float(np.exp(-growth / VIEW_SHAPE_RENEW))
 
 
+def misread(s: FilterState, v: ViewBias, r: _Rows, offset: np.ndarray, time: float) -> None:
+    """Average over VIEW_MISREAD_TAU_S how a view's detected corners depart from those its prior predicts (r.y plus
+    the prior's bias offset (8,), at a frame's first linearisation) in the one way no affine map of its marker's image
+    gives: along w (4,), the unit weights of its four predicted corners that sum their positions to zero, on each image
+    axis (2,). A pose that lags or errs moves a far marker's image affinely; one corner misread by δ puts δ/2 there.
+    Beyond VIEW_MISREAD_CHI2 of what the view's bias prior allows there (and its white noise's share of the average),
+    the view is misread beyond its prior: its shape bias's variance widens to the average's square, and after as far
+    as the average goes, for good (a shadow's edge or a plate's edge against a dark leg stays with the marker)."""
+    p = r.h.tolist()
+    w = np.array([_area(p, 1, 2, 3), -_area(p, 0, 2, 3), _area(p, 0, 1, 3), -_area(p, 0, 1, 2)])  # Σ w_i (x_i, y_i,
+    # 1) = 0 (Cramer's rule)
+    norm2 = float(w @ w)
+    departure = w @ (r.y + offset).reshape(4, 2)  # (2,) unnormalised
+    if not (norm2 > 0.0 and math.isfinite(departure[0]) and math.isfinite(departure[1])):
+        return
+    dt = VIEW_MISREAD_TAU_S if v.misread_time is None else max(0.0, time - v.misread_time)
+    alpha = 1.0 - math.exp(-dt / VIEW_MISREAD_TAU_S)
+    v.misread += alpha * (departure / math.sqrt(norm2) - v.misread)
+    v.misread_weight += alpha * (1.0 - v.misread_weight)
+    v.misread_time = time
+    if v.misread_weight < 0.5:
+        return
+    nb = s.body_size
+    k = v.index - nb
+    prior = s.renewal[k:k + VIEW] + s.renewal[k + VIEW:k + VIEW_STATES]  # (8,) per corner coordinate, x then y
+    allowed = float((w * w) @ (prior[0::2] + prior[1::2])) / (2.0 * norm2) + \
+        float(np.trace(r.R)) / VIEW * alpha / (2.0 - alpha)
+    m2 = float(v.misread @ v.misread)
+    if m2 <= (v.misread_px**2 if v.misread_px else VIEW_MISREAD_CHI2 * allowed):
+        return  # (once found misread, it widens as far as the average goes)
+    shape = s.renewal[k + VIEW:k + VIEW_STATES]
+    grow = np.maximum(VIEW_MISREAD_GAIN**2 * m2 - shape, 0.0)
+    s.renewal = s.renewal.copy()  # transitions already taken hold the old
+    s.renewal[k + VIEW:k + VIEW_STATES] += grow
+    i = np.arange(v.index + VIEW, v.index + VIEW_STATES)
+    s.P[i, i] += grow
+    s.misreads += 1
+    v.misread_px = max(v.misread_px, math.sqrt(m2))
+
+
+def _area(p: list[float], a: int, b: int, c: int) -> float:
+    """det [[x, y, 1]] of corners a, b, c of p (8,) as a list: twice their triangle's signed area."""
+    ax, ay = p[2 * a], p[2 * a + 1]
+    return (p[2 * b] - ax) * (p[2 * c + 1] - ay) - (p[2 * b + 1] - ay) * (p[2 * c] - ax)
+
+
 def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarray], K: np.ndarray, topside: bool,
                   time: float) -> bool:
     """One Kalman update with the corners (4, 2) of some markers of one body, each with its view's bias; False when
@@ -245,6 +295,8 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
         rows.append(r)
     if not rows:
         return False
+    for r in rows:
+        misread(s, s.views[(cam.name, r.marker)], r, bias(x0, views[r.marker]), time)
     xi = x0
     for iteration in range(CORNER_ITERATIONS):
         s.x, s.P = x0, P0
