@@ -490,20 +490,30 @@ def frozen_corner_run(pattern_px: float) -> tuple[float, float]:
         if o.camera == "far":
             for i in o.corners.keys() & pattern.keys():
                 o.corners[i] = o.corners[i] + pattern[i].reshape(o.corners[i].shape)
+    kf, est = run_corners(the_rig, obs)
+    cam = kf.cameras["far"]
+    assert cam.T_jacket_camera is not None
+    truth = look_at(CAMERA_EYES["far"], np.array([12.0, -10.0, 0.0]))
+    swing = rotvec(cam.T_jacket_camera[:3, :3] @ truth[:3, :3].T)[2]
+    err, sigma = errors_and_sigmas(est, 4.0)
+    return abs(swing) / float(np.sqrt(kf.P[cam.index + 2, cam.index + 2])), float(np.mean(np.abs(err) < 3 * sigma))
+
+
+def run_corners(the_rig: Rig, obs: list[BodyObservation]) -> tuple[TopsideFilter, list]:
+    """The live filter over corner observations, one at a time; it and its shown estimates at cones A and D."""
     kf = TopsideFilter(the_rig)
     est = []
     for o in obs:
         kf.predict(o.time, [o])
         kf.update(o)
         est.extend(e for e in kf.cone_estimates() if e.cone in "AD" and np.isfinite(e.offset).all())
-    cam = kf.cameras["far"]
-    assert cam.T_jacket_camera is not None
-    truth = look_at(CAMERA_EYES["far"], np.array([12.0, -10.0, 0.0]))
-    swing = rotvec(cam.T_jacket_camera[:3, :3] @ truth[:3, :3].T)[2]
-    est = [e for e in est if e.time > 4.0]
-    err = corner_errors(est, 4.0)
-    sigma = np.array([np.sqrt(np.diag(e.covariance)) for e in est])
-    return abs(swing) / float(np.sqrt(kf.P[cam.index + 2, cam.index + 2])), float(np.mean(np.abs(err) < 3 * sigma))
+    return kf, est
+
+
+def errors_and_sigmas(estimates: list, after: float) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) errors and (N, 3) σ of the estimates after a settling time, m."""
+    est = [e for e in estimates if e.time > after]
+    return corner_errors(est, after), np.array([np.sqrt(np.diag(e.covariance)) for e in est])
 
 
 def test_a_still_cameras_fixed_corner_error_is_not_averaged_away() -> None:
@@ -929,12 +939,7 @@ def test_a_corner_misread_all_run_long_widens_its_views_bias_and_no_other() -> N
             c = o.corners[0].reshape(4, 2).copy()
             c[1, 1] += 1.0
             o.corners[0] = c.reshape(o.corners[0].shape)
-    kf = TopsideFilter(the_rig)
-    est = []
-    for o in obs:
-        kf.predict(o.time, [o])
-        kf.update(o)
-        est.extend(e for e in kf.cone_estimates() if e.cone in "AD" and np.isfinite(e.offset).all())
+    kf, est = run_corners(the_rig, obs)
     widened = {key for key, v in kf.views.items()
                if (kf.renewal[v.index - kf.body_size:v.index - kf.body_size + VIEW_STATES] > VIEW_PRIOR).any()}
     assert widened == {("far", 0)}
@@ -954,8 +959,6 @@ def test_a_corner_misread_all_run_long_widens_its_views_bias_and_no_other() -> N
     other = FilterReport()
     other.misread = {("far", 0): 0.9, ("side", 3): 0.3}
     assert join_reports([(report, 0.5), (other, 0.5)], 0).misread == {("far", 0): 0.9, ("side", 3): 0.3}
-    est = [e for e in est if e.time > 4.0]
-    err = corner_errors(est, 4.0)
-    sigma = np.array([np.sqrt(np.diag(e.covariance)) for e in est])
+    err, sigma = errors_and_sigmas(est, 4.0)
     assert np.mean(np.abs(err) < 3 * sigma) > 0.99
     assert np.abs(err).max() < 0.04  # m; 69 mm when the misread went unfound, 26 mm found

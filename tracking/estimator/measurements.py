@@ -225,28 +225,27 @@ def shape_kept(v: ViewBias, corners: np.ndarray) -> float:
     return float(np.exp(-growth / VIEW_SHAPE_RENEW))
 
 
-def misread(s: FilterState, v: ViewBias, r: _Rows, offset: np.ndarray, time: float) -> None:
-    """Average over VIEW_MISREAD_TAU_S how a view's detected corners depart from those its prior predicts (r.y plus
-    the prior's bias offset (8,), at a frame's first linearisation) in the one way no affine map of its marker's image
-    gives: along w (4,), the unit weights of its four predicted corners that sum their positions to zero, on each image
-    axis (2,). A pose that lags or errs moves a far marker's image affinely; one corner misread by δ puts δ/2 there.
+def misread(s: FilterState, v: ViewBias, r: _Rows, z: np.ndarray, time: float) -> None:
+    """Average over VIEW_MISREAD_TAU_S how a view's detected corners z (4, 2) depart from those its prior predicts
+    (r.h, a frame's first linearisation) in the one way no affine map of its marker's image gives: along w (4,), the
+    unit weights of its four predicted corners that sum their positions to zero, on each image axis (2,). A pose that
+    lags or errs moves a far marker's image affinely; one corner misread by δ puts δ/2 there.
     Beyond VIEW_MISREAD_CHI2 of what the view's bias prior allows there (and its white noise's share of the average),
     the view is misread beyond its prior: its shape bias's variance widens to the average's square, and after as far
-    as the average goes, for good (a shadow's edge or a plate's edge against a dark leg stays with the marker)."""
+    as the average goes, for good (a shadow's edge or a plate's edge against a dark leg stays with the marker). The
+    average starts at its first frame's departure × (1 - 1/e), so one frame misread by more than about 1 px where a
+    view begins counts as found."""
     p = r.h.tolist()
     w = np.array([_area(p, 1, 2, 3), -_area(p, 0, 2, 3), _area(p, 0, 1, 3), -_area(p, 0, 1, 2)])  # Σ w_i (x_i, y_i,
     # 1) = 0 (Cramer's rule)
     norm2 = float(w @ w)
-    departure = w @ (r.y + offset).reshape(4, 2)  # (2,) unnormalised
+    departure = w @ (z.reshape(4, 2) - r.h.reshape(4, 2))  # (2,) unnormalised
     if not (norm2 > 0.0 and math.isfinite(departure[0]) and math.isfinite(departure[1])):
         return
     dt = VIEW_MISREAD_TAU_S if v.misread_time is None else max(0.0, time - v.misread_time)
     alpha = 1.0 - math.exp(-dt / VIEW_MISREAD_TAU_S)
     v.misread += alpha * (departure / math.sqrt(norm2) - v.misread)
-    v.misread_weight += alpha * (1.0 - v.misread_weight)
     v.misread_time = time
-    if v.misread_weight < 0.5:
-        return
     nb = s.body_size
     k = v.index - nb
     prior = s.renewal[k:k + VIEW] + s.renewal[k + VIEW:k + VIEW_STATES]  # (8,) per corner coordinate, x then y
@@ -261,7 +260,6 @@ def misread(s: FilterState, v: ViewBias, r: _Rows, offset: np.ndarray, time: flo
     s.renewal[k + VIEW:k + VIEW_STATES] += grow
     i = np.arange(v.index + VIEW, v.index + VIEW_STATES)
     s.P[i, i] += grow
-    s.misreads += 1
     v.misread_px = max(v.misread_px, math.sqrt(m2))
 
 
@@ -296,7 +294,7 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
     if not rows:
         return False
     for r in rows:
-        misread(s, s.views[(cam.name, r.marker)], r, bias(x0, views[r.marker]), time)
+        misread(s, s.views[(cam.name, r.marker)], r, corners[r.marker], time)
     xi = x0
     for iteration in range(CORNER_ITERATIONS):
         s.x, s.P = x0, P0

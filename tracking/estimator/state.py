@@ -63,7 +63,6 @@ class ViewBias:
     departure: float = 0.0  # the largest departure from that shape since, over its size
     misread: np.ndarray = field(init=False)  # (2,) px, its corners' departure from every affine image of the square
     # its pose predicts, averaged over VIEW_MISREAD_TAU_S (measurements.misread)
-    misread_weight: float = 0.0  # the share of that average its frames have filled (it starts from zero)
     misread_time: float | None = None  # capture time of its last frame in that average
     misread_px: float = 0.0  # the largest such average that widened its shape bias, px (0: never)
 
@@ -209,7 +208,6 @@ class FilterState:
     rejected: int = field(default=0, init=False)  # total gated measurements
     consecutive_rejects: int = field(default=0, init=False)  # of the topside
     jolts: int = field(default=0, init=False)  # frames whose jacket corners widened their camera's covariance
-    misreads: int = field(default=0, init=False)  # widenings of a view's corner found misread (measurements.misread)
     replacements: int = field(default=0, init=False)  # cameras placed again at a view that showed them moved beyond
     # their prior (TopsideFilter._jumped)
     last_accepted: dict[str, float] = field(init=False)  # camera -> capture time of its last topside view used
