@@ -38,6 +38,8 @@ from tracking.estimator.noise import (
     VIEW_BIAS_TAU_S,
     VIEW_MISREAD_CHI2,
     VIEW_MISREAD_GAIN,
+    VIEW_MISREAD_MIN_WEIGHT,
+    VIEW_MISREAD_STEP_S,
     VIEW_MISREAD_TAU_S,
     VIEW_SHAPE_RENEW,
     VIEW_STATES,
@@ -226,15 +228,16 @@ def shape_kept(v: ViewBias, corners: np.ndarray) -> float:
 
 
 def misread(s: FilterState, v: ViewBias, r: _Rows, z: np.ndarray, time: float) -> None:
-    """Average over VIEW_MISREAD_TAU_S how a view's detected corners z (4, 2) depart from those its prior predicts
-    (r.h, a frame's first linearisation) in the one way no affine map of its marker's image gives: along w (4,), the
-    unit weights of its four predicted corners that sum their positions to zero, on each image axis (2,). A pose that
-    lags or errs moves a far marker's image affinely; one corner misread by δ puts δ/2 there.
-    Beyond VIEW_MISREAD_CHI2 of what the view's bias prior allows there (and its white noise's share of the average),
-    the view is misread beyond its prior: its shape bias's variance widens to the average's square, and after as far
-    as the average goes, for good (a shadow's edge or a plate's edge against a dark leg stays with the marker). The
-    average starts at its first frame's departure × (1 - 1/e), so one frame misread by more than about 1 px where a
-    view begins counts as found."""
+    """Weigh over VIEW_MISREAD_TAU_S how a view's detected corners z (4, 2) depart from those its prior predicts (r.h,
+    a frame's first linearisation) in the one way no affine map of its marker's image gives: along w (4,), the unit
+    weights of its four predicted corners that sum their positions to zero, on each image axis (2,). A pose that lags
+    or errs moves a far marker's image affinely; one corner misread by δ puts δ/2 there. A near marker's perspective
+    moves there too as its pose errs: the pose's own σ along w (from the prior's covariance, r.P) is allowed.
+    The weights start from zero and a frame stands for at most VIEW_MISREAD_STEP_S, so a view is judged only once its
+    frames weigh VIEW_MISREAD_MIN_S: one frame a raindrop struck, first or after a gap, is a share of the average.
+    Beyond VIEW_MISREAD_CHI2 of what the view's bias prior, its white noise's share and its pose allow, the view is
+    misread beyond its prior: its shape bias's variance widens to the average's square (over its weight), and after
+    as far as the average goes, for good (a shadow's or a plate's edge against a dark leg stays with the marker)."""
     p = r.h.tolist()
     w = np.array([_area(p, 1, 2, 3), -_area(p, 0, 2, 3), _area(p, 0, 1, 3), -_area(p, 0, 1, 2)])  # Σ w_i (x_i, y_i,
     # 1) = 0 (Cramer's rule)
@@ -242,18 +245,29 @@ def misread(s: FilterState, v: ViewBias, r: _Rows, z: np.ndarray, time: float) -
     departure = w @ (z.reshape(4, 2) - r.h.reshape(4, 2))  # (2,) unnormalised
     if not (norm2 > 0.0 and math.isfinite(departure[0]) and math.isfinite(departure[1])):
         return
-    dt = VIEW_MISREAD_TAU_S if v.misread_time is None else max(0.0, time - v.misread_time)
+    unit = w / math.sqrt(norm2)
+    n_pose = len(r.idx) - VIEW_STATES
+    J = np.stack((unit @ r.H[0::2, :n_pose], unit @ r.H[1::2, :n_pose]))  # (2, n_pose) the pose's reach along w
+    pose_px = np.sqrt(np.maximum(((J @ r.P[:n_pose, :n_pose]) * J).sum(axis=1), 0.0))  # (2,)
+    dt = 0.0 if v.misread_time is None else min(max(0.0, time - v.misread_time), VIEW_MISREAD_STEP_S)
     alpha = 1.0 - math.exp(-dt / VIEW_MISREAD_TAU_S)
-    v.misread += alpha * (departure / math.sqrt(norm2) - v.misread)
+    v.misread = (1.0 - alpha) * v.misread + alpha * (departure / math.sqrt(norm2))
+    v.misread_pose_px = (1.0 - alpha) * v.misread_pose_px + alpha * pose_px  # σ of a sum ≤ the sum of σ
+    v.misread_weight = (1.0 - alpha) * v.misread_weight + alpha
+    v.misread_weight2 = (1.0 - alpha) ** 2 * v.misread_weight2 + alpha**2
     v.misread_time = time
+    if v.misread_weight < VIEW_MISREAD_MIN_WEIGHT:
+        return
     nb = s.body_size
     k = v.index - nb
     prior = s.renewal[k:k + VIEW] + s.renewal[k + VIEW:k + VIEW_STATES]  # (8,) per corner coordinate, x then y
-    allowed = float((w * w) @ (prior[0::2] + prior[1::2])) / (2.0 * norm2) + \
-        float(np.trace(r.R)) / VIEW * alpha / (2.0 - alpha)
+    allowed = v.misread_weight**2 * float((unit * unit) @ (prior[0::2] + prior[1::2])) / 2.0 + \
+        v.misread_weight2 * float(np.trace(r.R)) / VIEW + float(v.misread_pose_px @ v.misread_pose_px) / 2.0
     m2 = float(v.misread @ v.misread)
-    if m2 <= (v.misread_px**2 if v.misread_px else VIEW_MISREAD_CHI2 * allowed):
+    limit = (v.misread_px * v.misread_weight) ** 2 if v.misread_px else VIEW_MISREAD_CHI2 * allowed
+    if m2 <= limit:
         return  # (once found misread, it widens as far as the average goes)
+    m2 /= v.misread_weight**2  # the departure's estimate
     shape = s.renewal[k + VIEW:k + VIEW_STATES]
     grow = np.maximum(VIEW_MISREAD_GAIN**2 * m2 - shape, 0.0)
     s.renewal = s.renewal.copy()  # transitions already taken hold the old
@@ -312,8 +326,8 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
 @dataclass(frozen=True)
 class _Rows:
     """One marker's part of a corner update, linearised at a state x: its state entries idx (C,), H (8, C), the
-    innovation y (8,) against the prior x0 (z - h(x) - bias + H (x - x0)), R (8, 8), H P0 Hᵀ (8, 8), and h (8,) and x
-    where taken."""
+    innovation y (8,) against the prior x0 (z - h(x) - bias + H (x - x0)), R (8, 8), H P0 Hᵀ (8, 8), P0 over idx
+    (C, C), and h (8,) and x where taken."""
 
     marker: int
     idx: list[int]
@@ -321,6 +335,7 @@ class _Rows:
     y: np.ndarray
     R: np.ndarray
     HPH: np.ndarray
+    P: np.ndarray
     h: np.ndarray
     x: np.ndarray
 
@@ -337,8 +352,9 @@ def _rows(s: FilterState, cam: CameraState, marker: int, z: np.ndarray, K: np.nd
     y = z.reshape(-1) - h - bias(x, v)
     if x is not x0:
         y = y + H @ (x[idx] - x0[idx])
-    HPH = H @ P0.take(idx, 0).take(idx, 1) @ H.T  # P0[np.ix_(idx, idx)], 2.5 times faster
-    return _Rows(marker, idx, H, y, _corner_covariance(s, cam, J, HPH, y, topside), HPH, h, x)
+    P = P0.take(idx, 0).take(idx, 1)  # P0[np.ix_(idx, idx)], 2.5 times faster
+    HPH = H @ P @ H.T
+    return _Rows(marker, idx, H, y, _corner_covariance(s, cam, J, HPH, y, topside), HPH, P, h, x)
 
 
 def _apply_rows(s: FilterState, rows: list[_Rows]) -> tuple[np.ndarray, list[int]]:

@@ -62,13 +62,18 @@ class ViewBias:
     shape: np.ndarray = field(init=False)  # (4, 2) the corners about their centre at the last reset, px
     departure: float = 0.0  # the largest departure from that shape since, over its size
     misread: np.ndarray = field(init=False)  # (2,) px, its corners' departure from every affine image of the square
-    # its pose predicts, averaged over VIEW_MISREAD_TAU_S (measurements.misread)
+    # its pose predicts, weighted over VIEW_MISREAD_TAU_S from zero weight (measurements.misread)
+    misread_weight: float = 0.0  # the sum of those weights (1 once the view has been seen for several τ)
+    misread_weight2: float = 0.0  # the sum of their squares: the share of one frame's white noise left in the sum
+    misread_pose_px: np.ndarray = field(init=False)  # (2,) px, the weighted sum of the σ the pose's own uncertainty
+    # puts there (near markers: a perspective the pose errs in is not affine)
     misread_time: float | None = None  # capture time of its last frame in that average
     misread_px: float = 0.0  # the largest such average that widened its shape bias, px (0: never)
 
     def __post_init__(self) -> None:
         self.shape = centred(self.corners)
         self.misread = np.zeros(2)
+        self.misread_pose_px = np.zeros(2)
 
 
 def centred(corners: np.ndarray) -> np.ndarray:
