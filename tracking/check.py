@@ -67,6 +67,8 @@ from tracking.sources import Pacer, camera_frames
 DEFAULT_SECONDS = 5.0  # a few seconds of each camera: enough for the filter to settle a still installation's σ
 READY_MAX_SIGMA_M = 0.025  # a ready cone's 2σ (50 mm) takes at most a third of the 150 mm concentricity tolerance
 MIN_CAMERAS = 2  # a cone measured by one camera goes blind when that camera fails: weak
+TILT_NOTE_LEVER_M = 10.0  # a cone this far off the point or line the seen topside markers span is told how the
+# topside's tilt reaches it: a milliradian misread there moves it 10 mm, a fifth of the report limit
 SEEN_SHARE = 0.5  # a camera counts for a marker (and its cone) when it detects it in at least this share of its frames
 CLOCK_RATE_TOLERANCE = 0.005  # a clock 0.5 % off its declared rate drifts 50 ms in 10 s against the common clock: 12 mm
 # of topside travel at the crane's 0.25 m/s
@@ -380,6 +382,8 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
                   f"no camera sees a topside marker at {cone}" if has_markers else
                   f"no marker at {cone}: from the topside's rigid pose through {', '.join(everyone) or 'no camera'}")
         depth = depth_reason(e, cameras, rig, cone) if e is not None and worst > READY_MAX_SIGMA_M else ""
+        if not has_markers:
+            depth += tilt_reason(rig, cone, {c for s in topside if (c := by_id[s.marker].cone) is not None})
         if not np.isfinite(worst):
             verdict: Verdict = "weak" if has_markers and cameras else "blind"
             reason = f"{source}; the filter gave no estimate in these seconds: it would show NO DATA{depth}"
@@ -398,6 +402,29 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
             verdict, reason = "ready", f"{source}; {mm}"
         out.append(ConeCheck(cone, sigma, cameras, verdict, reason))
     return out
+
+
+def tilt_reason(rig: Rig, cone: str, seen: set[str]) -> str:
+    """'; it turns with the topside's tilt about ...' for a cone without topside markers when those the cameras see sit
+    at one cone or two (at three, their positions tell every tilt): the topside's tilt about that point or line then
+    rests on those markers' own orientation (a far marker's shape, which tells it weakly), and the cone, d m off it,
+    moves d mm a milliradian; else ''."""
+    if len(seen) not in (1, 2):
+        return ""
+    names = sorted(seen)
+    centres = [np.mean([m.center for m in rig.markers if m.body == "topside" and m.cone == c], axis=0) for c in names]
+    lever = cone_points(rig)[cone] - centres[0]
+    if len(centres) == 2:
+        axis = (centres[1] - centres[0]) / np.linalg.norm(centres[1] - centres[0])
+        lever = lever - (lever @ axis) * axis
+    d = float(np.linalg.norm(lever))
+    if d < TILT_NOTE_LEVER_M:
+        return ""
+    about = f"its topside marker at {names[0]}" if len(names) == 1 else \
+        f"the line through its topside markers at {names[0]} and {names[1]}"
+    return (f"; it turns with the topside's tilt about {about}, which only their own orientation tells (a topside "
+            f"marker at another cone would tell it by positions): {d:.0f} m off, each milliradian misread moves it "
+            f"{d:.0f} mm")
 
 
 DEPTH_ALIGNED_DEG = 30.0  # a cone's least known direction within this of a camera's line of sight is its depth

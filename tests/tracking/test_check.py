@@ -145,7 +145,11 @@ def test_cones_without_markers_are_weak_and_a_far_one_blind(clip: Path, runs: di
                                                            "E": "blind"}
     assert verdicts["E"].sigma_m.max() > 0.05
     assert verdicts["E"].reason.startswith("no marker at E: from the topside's rigid pose")
-    assert verdicts["E"].reason.endswith("above the 50 mm report limit: it would show NO DATA")  # whole: no pair
+    assert "above the 50 mm report limit: it would show NO DATA" in verdicts["E"].reason  # whole: no pair
+    for cone, lever in (("B", 25), ("C", 25), ("E", 163)):  # x 12-13.1 m, the topside markers at A and D along y
+        assert "tilt about the line through its topside markers at A and D" in verdicts[cone].reason
+        assert verdicts[cone].reason.endswith(f"{lever} m off, each milliradian misread moves it {lever} mm")
+    assert "tilt" not in verdicts["A"].reason + verdicts["D"].reason
     assert "cone E: blind: no marker at E" in "\n".join(report.problems())
     assert not report.disagreements and not report.ready
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -926,24 +927,26 @@ def test_the_transition_is_its_dense_matrix_and_renews_what_it_does_not_keep() -
     assert np.allclose(t.apply(P[:, :3]), F @ P[:, :3])
 
 
-def test_one_frame_misread_where_a_view_begins_widens_nothing() -> None:
-    """One corner 2 px off in the first frame of every view (a raindrop as the camera starts), clean after: no view is
-    found misread, since a view is judged only once its frames weigh half a second (counted from its first frame at
-    63 % of the average, side's marker 3 was widened for the run)."""
+def test_a_views_first_frames_misread_widen_nothing() -> None:
+    """One corner 2 px off in the first three frames of every view (a raindrop as the cameras start, 0.2 s), clean
+    after: no view is found misread. A view's first frame only starts its average's clock, and a view is judged once
+    its frames weigh half a second (judged from its second frame, side's marker 3 is widened for the run; with its
+    first frame filling 63 % of the average, as before, one struck frame did it)."""
     from tracking.estimator.noise import VIEW_PRIOR, VIEW_STATES
 
     the_rig = camera_rig("vessel")
     obs = observations(the_rig, 6.0)
-    struck: set[tuple[str, int]] = set()
+    frames: Counter[tuple[str, int]] = Counter()
     for o in obs:
-        for marker in sorted(set(o.corners) - {m for c, m in struck if c == o.camera}):
-            struck.add((o.camera, marker))
-            c = o.corners[marker].reshape(4, 2).copy()
-            c[1, 1] += 2.0
-            o.corners[marker] = c.reshape(o.corners[marker].shape)
+        for marker in sorted(o.corners):
+            if frames[o.camera, marker] < 3:
+                c = o.corners[marker].reshape(4, 2).copy()
+                c[1, 1] += 2.0
+                o.corners[marker] = c.reshape(o.corners[marker].shape)
+            frames[o.camera, marker] += 1
     kf, _ = run_corners(the_rig, obs)
-    assert len(struck) == len(kf.views) == 6
-    assert all(v.misread_px == 0.0 for v in kf.views.values())
+    assert set(frames) == set(kf.views) and len(kf.views) == 6
+    assert all(v.misread_weight > 0.9 and v.misread_px == 0.0 for v in kf.views.values())  # weighed, not found
     assert all((kf.renewal[v.index - kf.body_size:v.index - kf.body_size + VIEW_STATES] == VIEW_PRIOR).all()
                for v in kf.views.values())
 
@@ -951,7 +954,7 @@ def test_one_frame_misread_where_a_view_begins_widens_nothing() -> None:
 def test_a_corner_misread_all_run_long_widens_its_views_bias_and_no_other() -> None:
     """One corner of the far still camera's view of a jacket marker reads 1 px off in every frame (a shadow's edge
     across it): the filter finds that view misread and widens its shape bias; the clean views, with white noise alone,
-    keep their prior; the cones stay within 3σ and 50 mm (unfound, the misread turned the camera: 69 mm)."""
+    keep their prior; the cones stay within 3σ and 45 mm (unfound, the misread turned the camera: 69 mm)."""
     from tracking.estimator.noise import VIEW_PRIOR, VIEW_STATES
 
     the_rig = camera_rig("vessel")
@@ -983,4 +986,4 @@ def test_a_corner_misread_all_run_long_widens_its_views_bias_and_no_other() -> N
     assert join_reports([(report, 0.5), (other, 0.5)], 0).misread == {("far", 0): 0.9, ("side", 3): 0.3}
     err, sigma = errors_and_sigmas(est, 4.0)
     assert np.mean(np.abs(err) < 3 * sigma) > 0.99
-    assert np.abs(err).max() < 0.05  # m; 69 mm when the misread went unfound, 39 mm found after half a second
+    assert np.abs(err).max() < 0.045  # m; 69 mm when the misread went unfound, 39 mm found after half a second
