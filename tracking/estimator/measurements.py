@@ -236,8 +236,8 @@ def misread(s: FilterState, v: ViewBias, r: _Rows, z: np.ndarray, time: float) -
     The weights start from zero (a view's first frame only starts its clock) and a frame stands for at most
     VIEW_MISREAD_STEP_S, so a view is judged only once its frames weigh VIEW_MISREAD_MIN_S: one frame a raindrop
     struck is a share of the average (after a gap, at most VIEW_MISREAD_STEP_S's).
-    Beyond VIEW_MISREAD_CHI2 of what the view's bias prior, its white noise (each frame's R along w, as weighted) and
-    its pose allow, the view is misread beyond its prior: its shape bias's variance widens to the average's square
+    Beyond VIEW_MISREAD_CHI2 of what the view's bias prior, its white noise (this frame's R, as weighted) and its pose
+    allow, the view is misread beyond its prior: its shape bias's variance widens to the average's square
     (over its weight), and after as far as the average goes, for good (a shadow's or a plate's edge against a dark leg
     stays with the marker)."""
     p = r.h.tolist()
@@ -256,12 +256,11 @@ def misread(s: FilterState, v: ViewBias, r: _Rows, z: np.ndarray, time: float) -
     n_pose = len(r.idx) - VIEW_STATES
     J = np.stack((unit @ r.H[0::2, :n_pose], unit @ r.H[1::2, :n_pose]))  # (2, n_pose) the pose's reach along w
     pose_px = np.sqrt(np.maximum(((J @ r.P[:n_pose, :n_pose]) * J).sum(axis=1), 0.0))  # (2,)
-    noise = float(unit @ r.R[0::2, 0::2] @ unit + unit @ r.R[1::2, 1::2] @ unit) / 2.0  # px², a coordinate's along w
     alpha = 1.0 - math.exp(-min(time - v.misread_time, VIEW_MISREAD_STEP_S) / VIEW_MISREAD_TAU_S)
     v.misread = (1.0 - alpha) * v.misread + alpha * departure
     v.misread_pose_px = (1.0 - alpha) * v.misread_pose_px + alpha * pose_px  # σ of a sum ≤ the sum of σ
     v.misread_weight = (1.0 - alpha) * v.misread_weight + alpha
-    v.misread_noise = (1.0 - alpha) ** 2 * v.misread_noise + alpha**2 * noise
+    v.misread_weight2 = (1.0 - alpha) ** 2 * v.misread_weight2 + alpha**2
     v.misread_time = time
     if v.misread_weight < VIEW_MISREAD_MIN_WEIGHT:
         return
@@ -269,7 +268,8 @@ def misread(s: FilterState, v: ViewBias, r: _Rows, z: np.ndarray, time: float) -
     k = v.index - nb
     prior = s.renewal[k:k + VIEW] + s.renewal[k + VIEW:k + VIEW_STATES]  # (8,) per corner coordinate, x then y
     allowed = v.misread_weight**2 * float((unit * unit) @ (prior[0::2] + prior[1::2])) / 2.0 + \
-        v.misread_noise + float(v.misread_pose_px @ v.misread_pose_px) / 2.0
+        v.misread_weight2 * float(np.trace(r.R)) / VIEW + float(v.misread_pose_px @ v.misread_pose_px) / 2.0  # (R
+    # now, not each frame's own: a misread corner's Huber-widened R then hid random-9009 D's misread)
     m2 = float(v.misread @ v.misread)
     limit = (v.misread_px * v.misread_weight) ** 2 if v.misread_px else VIEW_MISREAD_CHI2 * allowed
     if m2 <= limit:

@@ -64,7 +64,7 @@ class ViewBias:
     misread: np.ndarray = field(init=False)  # (2,) px, its corners' departure from every affine image of the square
     # its pose predicts, weighted over VIEW_MISREAD_TAU_S from zero weight (measurements.misread)
     misread_weight: float = 0.0  # the sum of those weights (1 once the view has been seen for several τ)
-    misread_noise: float = 0.0  # px², the white noise's variance in that sum (Σ weight² × a frame's R along w)
+    misread_weight2: float = 0.0  # the sum of their squares: the share of one frame's white noise left in the sum
     misread_pose_px: np.ndarray = field(init=False)  # (2,) px, the weighted sum of the σ the pose's own uncertainty
     # puts there (near markers: a perspective the pose errs in is not affine)
     misread_time: float | None = None  # capture time of its last frame in that average
@@ -78,7 +78,7 @@ class ViewBias:
         """The misread average back to nothing weighed (a widening already made stays in the filter's renewal)."""
         self.misread = np.zeros(2)
         self.misread_pose_px = np.zeros(2)
-        self.misread_weight = self.misread_noise = 0.0
+        self.misread_weight = self.misread_weight2 = 0.0
         self.misread_time = None
 
 
