@@ -381,21 +381,21 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
         source = (f"seen by {', '.join(cameras)}" if has_markers and cameras else
                   f"no camera sees a topside marker at {cone}" if has_markers else
                   f"no marker at {cone}: from the topside's rigid pose through {', '.join(everyone) or 'no camera'}")
-        depth = depth_reason(e, cameras, rig, cone) if e is not None and worst > READY_MAX_SIGMA_M else ""
+        why = depth_reason(e, cameras, rig, cone) if e is not None and worst > READY_MAX_SIGMA_M else ""
         if not has_markers:
-            depth += tilt_reason(rig, cone, {c for s in topside if (c := by_id[s.marker].cone) is not None})
+            why += tilt_reason(rig, cone, {c for s in topside if (c := by_id[s.marker].cone) is not None})
         if not np.isfinite(worst):
             verdict: Verdict = "weak" if has_markers and cameras else "blind"
-            reason = f"{source}; the filter gave no estimate in these seconds: it would show NO DATA{depth}"
+            reason = f"{source}; the filter gave no estimate in these seconds: it would show NO DATA{why}"
         elif worst > REPORT_MAX_SIGMA_M:
             verdict = "weak" if has_markers and cameras else "blind"
             partly = (f" on {axes_withheld(e.offset)} (its other axes alone)"  # as the filter gave it
                       if e is not None and np.isfinite(e.offset).any() else "")
             reason = (f"{source}; {mm} is above the {REPORT_MAX_SIGMA_M * 1000:.0f} mm report limit: it would show "
-                      f"NO DATA{partly}{depth}")
+                      f"NO DATA{partly}{why}")
         elif worst > READY_MAX_SIGMA_M:
             verdict, reason = "weak", (f"{source}; {mm} is above the {READY_MAX_SIGMA_M * 1000:.0f} mm a ready cone "
-                                       f"has{depth}")
+                                       f"has{why}")
         elif len(cameras) < MIN_CAMERAS:
             verdict, reason = "weak", f"{source}; {mm}, but from one camera only: it goes blind if that camera fails"
         else:

@@ -250,9 +250,11 @@ def misread(s: FilterState, v: ViewBias, r: _Rows, z: np.ndarray, time: float) -
     departure = unit @ (z.reshape(4, 2) - r.h.reshape(4, 2))  # (2,) px
     if not (math.isfinite(departure[0]) and math.isfinite(departure[1])):
         return
-    if v.misread_time is None or time <= v.misread_time:
-        v.misread_time = time if v.misread_time is None else v.misread_time
-        return  # (a frame that starts the clock, or comes back in time, weighs nothing)
+    if v.misread_time is None:
+        v.misread_time = time
+        return  # (a view's first frame starts the clock and weighs nothing)
+    if time <= v.misread_time:
+        return  # (nor does a frame back in time)
     n_pose = len(r.idx) - VIEW_STATES
     J = np.stack((unit @ r.H[0::2, :n_pose], unit @ r.H[1::2, :n_pose]))  # (2, n_pose) the pose's reach along w
     pose_px = np.sqrt(np.maximum(((J @ r.P[:n_pose, :n_pose]) * J).sum(axis=1), 0.0))  # (2,)

@@ -53,8 +53,8 @@ VIEW_MISREAD_TAU_S = 2.0  # how long a view's corners are averaged to find its m
 # its image departing from every affine map of the square its pose predicts, where no pose error puts it
 VIEW_MISREAD_STEP_S = 0.25  # ... where one frame stands for at most this long (a view back after a gap is one frame,
 # not the gap: 6 fps webcams' frames are 0.17-0.21 s apart)
-VIEW_MISREAD_MIN_S = 0.5  # ... and a view is judged once its frames weigh this long: one frame a raindrop struck,
-# first or after a gap, is a share of the average, not all of it (judged after 2 s, a still camera's view with one
+VIEW_MISREAD_MIN_S = 0.5  # ... and a view is judged once its frames weigh this long: a raindrop on its first frames
+# is a share of the average, not all of it (judged after 2 s, a still camera's view with one
 # corner 1 px off turned the camera and its cones 61 mm off before it was found; after 0.5 s, 39 mm; 28 after 0.2 s)
 VIEW_MISREAD_MIN_WEIGHT = 1.0 - float(np.exp(-VIEW_MISREAD_MIN_S / VIEW_MISREAD_TAU_S))
 VIEW_MISREAD_CHI2 = 13.82  # χ²(2 dof, 99.9 %) of what the view's bias prior allows there: beyond, it is misread (a
