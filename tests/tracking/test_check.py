@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -26,6 +27,7 @@ from tracking.check import (
     run_cameras,
 )
 from tracking.estimate import ConeEstimate
+from tracking.estimator.noise import TILT_FLOOR_RAD
 from tracking.images import VideoHealth
 from tracking.pipeline import CameraTracker
 from tracking.rig import load_rig
@@ -148,7 +150,11 @@ def test_cones_without_markers_are_weak_and_a_far_one_blind(clip: Path, runs: di
     assert "above the 50 mm report limit: it would show NO DATA" in verdicts["E"].reason  # whole: no pair
     for cone, lever in (("B", 25), ("C", 25), ("E", 163)):  # x 12-13.1 m, the topside markers at A and D along y
         assert "tilt about the line through its topside markers at A and D" in verdicts[cone].reason
-        assert verdicts[cone].reason.endswith(f"{lever} m off, each milliradian misread moves it {lever} mm")
+        said = re.search(r"(\d+) m off, each milliradian misread moves it (\d+) mm, and σ is at least (\d+) mm there$",
+                         verdicts[cone].reason)
+        assert said and int(said[1]) == int(said[2]) == lever
+        assert abs(int(said[3]) - lever * TILT_FLOOR_RAD * 1000) <= 1  # the tracker's floor on that tilt's σ
+        assert verdicts[cone].sigma_m.max() >= 0.95 * int(said[3]) / 1000  # the filter's σ holds it
     assert "tilt" not in verdicts["A"].reason + verdicts["D"].reason
     assert "cone E: blind: no marker at E" in "\n".join(report.problems())
     assert not report.disagreements and not report.ready

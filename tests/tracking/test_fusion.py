@@ -900,6 +900,38 @@ def test_the_cameras_disagreement_floors_a_cones_sigma_and_their_comparison_hold
     assert {e.withheld for e in wide} == {WITHHELD_SIGMA}
 
 
+def test_a_turn_only_the_markers_orientation_tells_is_held_to_its_floor() -> None:
+    """Topside markers seen at one cone tell the topside's turn by their orientation alone, which errs beyond what
+    their corners say (random-10002: 1.6 mrad RMS at σ 0.7 mrad): a cone L metres off gets σ ≥ L × TILT_FLOOR_RAD
+    across its lever. Markers at two cones leave the turn about their line; at three, none; a floor, not an addition."""
+    from tracking.estimator.noise import STATE, TILT_FLOOR_RAD
+    from tracking.estimator.state import untold_turn
+
+    kf = TopsideFilter(rig())  # topside markers 1 and 3 at A, 5 and 7 at D
+    P = kf.P.copy()
+    P[:STATE, :STATE] = np.diag([0.002**2] * 3 + [1e-4**2] * 3 + [1e-6] * 6)  # 2 mm, the turn to 0.1 mrad
+
+    def sigmas(seen: set[int], P: np.ndarray = P) -> dict[str, np.ndarray]:
+        return {e.cone: np.sqrt(np.diag(e.covariance))
+                for e in kf.cone_estimates(kf.x, P, 0.0, (), warming=False, seen=frozenset(seen))}
+
+    none, at_a, at_ad = sigmas(set()), sigmas({1, 3}), sigmas({1, 3, 5, 7})
+    centre_a = (kf.centres[1] + kf.centres[3]) / 2
+    lever = float(np.linalg.norm((kf.cones["C"] - centre_a)[:2]))  # 32 m: its height turns about both level axes
+    assert none["C"][2] < 0.006 and at_a["C"][2] > 0.95 * TILT_FLOOR_RAD * lever
+    assert at_a["A"][2] < none["A"][2] + 0.002  # the markers' own cone hardly moves
+    across = float(kf.centres[1][0] - kf.cones["C"][0])  # 24.5 m from the line through A and D
+    assert at_ad["C"][2] > 0.95 * TILT_FLOOR_RAD * across and at_ad["C"][2] < at_a["C"][2]
+    assert at_ad["D"][2] < none["D"][2] + 0.002
+    wide = P.copy()
+    wide[3:6, 3:6] = np.eye(3) * (3 * TILT_FLOOR_RAD) ** 2  # already wider than the floor: nothing added
+    assert np.allclose(sigmas({1, 3}, wide)["C"], sigmas(set(), wide)["C"])
+    corners = np.array([[12.0, -10.0, 1.0], [12.0, 10.0, 1.0], [-12.0, 10.0, 1.0]])
+    assert untold_turn(corners[:1], 5.0)[1].shape[1] == 3 and untold_turn(corners, 5.0)[1].shape[1] == 0
+    (axis,) = untold_turn(corners[:2], 5.0)[1].T
+    assert abs(axis[1]) == pytest.approx(1.0) and untold_turn(corners[:2] / 25, 5.0)[1].shape[1] == 3  # in sides
+
+
 def test_the_transition_is_its_dense_matrix_and_renews_what_it_does_not_keep() -> None:
     from tracking.estimator.process import Transition, rate_decay
 

@@ -122,6 +122,7 @@ class TopsideFilter(FilterState):
         self.consecutive_rejects = 0
         self.last_accepted[m.camera] = m.time
         self.pair_seen[m.cone] = m.time
+        self.topside_seen[m.topside_id] = m.time
         if self.placed_at is None:
             self.placed_at = m.time
         return True
@@ -267,6 +268,12 @@ class TopsideFilter(FilterState):
             if j in seen and t in seen:
                 self.pair_seen[cone] = time
 
+    def seen_topside(self) -> frozenset[int]:
+        """The topside markers measured within CONTRIBUTION_WINDOW_S of the last one measured: those the topside's pose
+        rests on now, or did before a gap (its turn is no better known for it)."""
+        last = max(self.topside_seen.values(), default=0.0)
+        return frozenset(i for i, t in self.topside_seen.items() if last - t <= CONTRIBUTION_WINDOW_S)
+
     def warming(self) -> bool:
         """Whether the filter is within REPORT_WARMUP_S of the topside's (last) placement."""
         return self.placed_at is None or self.time is None or self.time - self.placed_at < REPORT_WARMUP_S
@@ -274,14 +281,17 @@ class TopsideFilter(FilterState):
     def cone_estimates(self, x: np.ndarray | None = None, P: np.ndarray | None = None,
                        time: float | None = None, cameras: tuple[str, ...] | None = None,
                        warming: bool | None = None, floors: tuple[np.ndarray, np.ndarray] | None = None,
-                       measured: frozenset[str] | None = None) -> list[ConeEstimate]:
+                       measured: frozenset[str] | None = None,
+                       seen: frozenset[int] | None = None) -> list[ConeEstimate]:
         """Offset and covariance at every cone from a state (default: the current one), its variance per axis at least
         its cameras' disagreement (floors: (C, 3) variances and (C,) cones whose cameras are not yet compared,
         default: the current ones, tracking.estimator.disagreement), withholding cones whose σ exceeds
         REPORT_MAX_SIGMA_M, or REPORT_WARMUP_SIGMA_SIDES of a marker side while warming (default: whether the filter
         is now; after the warm-up, at a cone whose pair a camera measures (measured, default: now), only its axes
         beyond the limit), or whose cameras are not yet compared; from the current state, with the placed cameras'
-        poses (a past state's are relative to nominals since moved). A past state without its floors gets none."""
+        poses (a past state's are relative to nominals since moved). A past state without its floors gets none. The
+        topside's turn about the axes the seen topside markers (seen, default: now) do not tell by their positions is
+        held to σ ≥ TILT_FLOOR_RAD (FilterState.tilt_floor)."""
         poses = None if x is not None else CameraPoses(
             {name: (cam.T_jacket_camera, cam.index) for name, cam in self.cameras.items()
              if cam.T_jacket_camera is not None}, self.x[:self.body_size].copy())
@@ -295,6 +305,7 @@ class TopsideFilter(FilterState):
         cameras = self.contributing() if cameras is None else cameras
         warming = self.warming() if warming is None else warming
         measured = self.measured() if measured is None else measured
+        seen = self.seen_topside() if seen is None else seen
         limit = min(REPORT_MAX_SIGMA_M, REPORT_WARMUP_SIGMA_SIDES * self.rig.marker_size) if warming \
             else REPORT_MAX_SIGMA_M
         clock = self.clock_bound(cameras)
@@ -303,6 +314,9 @@ class TopsideFilter(FilterState):
         covs = timeds = H @ P[:STATE, :STATE] @ H.transpose(0, 2, 1)  # (C, 3, 3)
         if added.any():  # σ at least the cameras' spread (the filter's own σ may hold it already)
             covs = timeds = covs + np.fmax(added - np.diagonal(covs, axis1=1, axis2=2), 0.0)[:, :, None] * np.eye(3)
+        tilt = self.tilt_floor(seen, P[3:6, 3:6])
+        if tilt is not None:
+            covs = timeds = covs + tilt
         if clock:  # the estimate is the topside's at a time its cameras' clocks hold to σ: its motion over it
             speeds = H[:, :, :6] @ x[6:STATE]
             covs = covs + clock**2 * (speeds[:, :, None] * speeds[:, None, :]

@@ -318,6 +318,8 @@ def corner_update(s: FilterState, cam: CameraState, corners: dict[int, np.ndarra
         return False
     for r in rows:
         misread(s, s.views[(cam.name, r.marker)], r, corners[r.marker], time)
+        if topside:
+            s.topside_seen[r.marker] = time
     xi = x0
     for iteration in range(CORNER_ITERATIONS):
         s.x, s.P = x0, P0

@@ -36,6 +36,7 @@ class FilterStep:
     floors: tuple[np.ndarray, np.ndarray]  # the cameras' disagreement at each cone (estimator.disagreement): the
     # variance it adds (C, 3) and the cones whose cameras are not yet compared (C,)
     measured: frozenset[str] = frozenset()  # the cones whose pair a camera saw then (TopsideFilter.measured)
+    seen: frozenset[int] = frozenset()  # the topside markers measured then (TopsideFilter.seen_topside)
     replaced: bool = False  # a camera was placed again in this step (TopsideFilter.replacements): no linear
     # transition leads into it, so the backward pass starts afresh before it
 
@@ -70,7 +71,7 @@ def smoothed_estimates(rig: Rig, measurements: Iterable[Measurement], tuning: Fi
             now = group[0].time if kf.time is None else kf.time  # predict set it
             steps.append(FilterStep(now, x_pred, kf.x.copy(), kf.P.astype(np.float32), F, kf.contributing(),
                                     kf.warming(), kf.disagreement.floors(now), kf.measured(),
-                                    kf.replacements != replacements))
+                                    kf.seen_topside(), kf.replacements != replacements))
             if steps[-1].time - steps[0].time >= span_s + lag_s:
                 yield from _smooth_back(kf, steps, steps[-1].time - lag_s)
     yield from _smooth_back(kf, steps, np.inf)
@@ -85,7 +86,7 @@ def _smooth_back(kf: TopsideFilter, steps: list[FilterStep], until: float) -> It
         return
     nxt = steps[-1]
     x_s = nxt.x
-    out = [kf.cone_estimates(x_s, nxt.P, nxt.time, nxt.cameras, nxt.warming, nxt.floors, nxt.measured)
+    out = [kf.cone_estimates(x_s, nxt.P, nxt.time, nxt.cameras, nxt.warming, nxt.floors, nxt.measured, nxt.seen)
            ] if nxt.time < until else []
     for step in reversed(steps[:-1]):
         P = step.P
@@ -99,7 +100,7 @@ def _smooth_back(kf: TopsideFilter, steps: list[FilterStep], until: float) -> It
             x_s[kf.consider.indices] = 0.0  # considered, not estimated (FilterState.apply)
         if step.time < until:
             out.append(kf.cone_estimates(x_s, P, step.time, step.cameras, step.warming, step.floors,
-                                          step.measured))
+                                          step.measured, step.seen))
         nxt = step
     del steps[:len(out)]  # the smoothed ones are the oldest: the rest waits for more of the future
     for estimates in reversed(out):

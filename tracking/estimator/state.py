@@ -18,7 +18,16 @@ from scipy.linalg.lapack import dtrtrs
 from threadpoolctl import threadpool_limits
 
 from tracking.estimator.hypotheses import Hypotheses
-from tracking.estimator.noise import STATE, VIEW_PRIOR, VIEW_STATES, CornerNoise, FilterTuning, prior_covariance
+from tracking.estimator.noise import (
+    STATE,
+    TILT_BASELINE_SIDES,
+    TILT_FLOOR_RAD,
+    VIEW_PRIOR,
+    VIEW_STATES,
+    CornerNoise,
+    FilterTuning,
+    prior_covariance,
+)
 from tracking.estimator.process import CameraMotionLevel, PoseMotionLevel
 from tracking.geometry import rotation, skew
 from tracking.offsets import body_geometry
@@ -48,6 +57,17 @@ def point_offset_matrix(r: np.ndarray) -> np.ndarray:
     H[:, :3] = np.eye(3)
     H[:, 3:6] = -skew(r)
     return H
+
+
+def untold_turn(points: np.ndarray, baseline: float) -> tuple[np.ndarray, np.ndarray]:
+    """The centre (3,) of some topside points (n, 3) and the axes (3, k) about which their positions do not tell the
+    topside's turn: those they spread less than baseline (m) across (RMS distance from the axis through the centre).
+    One cone's markers leave every axis; two cones', the line through them; three cones', none."""
+    c = points.mean(axis=0)
+    d = points - c
+    M = d.T @ d / len(points)
+    w, V = np.linalg.eigh(np.trace(M) * np.eye(3) - M)  # the spread² across each axis
+    return c, V[:, w < baseline**2]
 
 
 @dataclass
@@ -234,6 +254,9 @@ class FilterState:
     pair_ids: tuple[tuple[str, int, int], ...] = field(init=False)  # (cone, jacket id, topside id) of every pair (the
     # other cones' offsets come through the topside)
     pair_seen: dict[str, float] = field(init=False)  # cone -> capture time a camera's frame last measured its pair
+    topside_seen: dict[int, float] = field(init=False)  # topside marker id -> capture time it was last measured
+    _levers: dict[frozenset[int], tuple[np.ndarray, np.ndarray]] = field(init=False)  # seen topside markers -> the
+    # axes their positions do not tell (3, k) and each cone's lever from their centre as a turn's offset (C, 3, 3)
     cone_rows: tuple[list[str], np.ndarray] = field(init=False)  # the cones in name order and their offsets' (C, 3,
     # 12) point_offset_matrix
     clock_sigma: dict[str, float] = field(init=False)  # camera -> its clock's σ, s (rig: time_offset_sigma)
@@ -261,7 +284,7 @@ class FilterState:
         self.centres = {m.id: np.array(m.center, dtype=float) for m in self.rig.markers}
         self.cones = cone_points(self.rig)
         self.pair_ids = tuple((p.cone, p.jacket, p.topside) for p in self.rig.all_pairs())
-        self.pair_seen = {}
+        self.pair_seen, self.topside_seen, self._levers = {}, {}, {}
         names = sorted(self.cones)
         self.cone_rows = (names, np.array([point_offset_matrix(self.cones[c]) for c in names]).reshape(-1, 3, STATE))
         self.clock_sigma = {c.name: float(c.time_offset_sigma or 0.0) for c in self.rig.cameras}
@@ -272,6 +295,29 @@ class FilterState:
     def size(self) -> int:
         """Length of the state: the bodies', the consider states' and the views' biases so far."""
         return self.x.size
+
+    def tilt_floor(self, seen: frozenset[int], P_turn: np.ndarray) -> np.ndarray | None:
+        """(C, 3, 3) the variance the cones' offsets (cone_rows' order) gain when the topside's turn about the axes the
+        seen topside markers' positions do not tell (untold_turn over TILT_BASELINE_SIDES) is held to σ ≥
+        TILT_FLOOR_RAD, from the turn's covariance P_turn (3, 3): about those axes only their orientation tells it, and
+        a marker's orientation from its corners errs beyond what its corners' σ says (docs/method.md). Each cone moves
+        by its lever from the markers' centre; None when nothing is seen or the turn already has that σ about every
+        such axis."""
+        if not seen:
+            return None
+        if seen not in self._levers:
+            c, U = untold_turn(np.array([self.centres[i] for i in sorted(seen)]),
+                               TILT_BASELINE_SIDES * self.rig.marker_size)
+            self._levers[seen] = (U, -np.array([skew(self.cones[name] - c) for name in self.cone_rows[0]]))
+        U, A = self._levers[seen]
+        if not U.shape[1]:
+            return None
+        w, V = np.linalg.eigh(TILT_FLOOR_RAD**2 * np.eye(U.shape[1]) - U.T @ P_turn @ U)
+        if w.max() <= 0.0:
+            return None
+        B = U @ V
+        added = (B * np.fmax(w, 0.0)) @ B.T  # (3, 3) the turn's variance raised to the floor about the untold axes
+        return A @ added @ A.transpose(0, 2, 1)
 
     def camera_pose(self, cam: CameraState, x: np.ndarray | None = None) -> np.ndarray:
         """(4, 4) T_jacket_camera of a placed camera in a state (default: the current one)."""
