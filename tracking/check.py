@@ -408,7 +408,7 @@ def tilt_reason(rig: Rig, cone: str, seen: set[str]) -> str:
     """'; it turns with the topside's tilt about ...' for a cone without topside markers when those the cameras see sit
     at one cone or two (at three, their positions tell every tilt): the topside's tilt about that point or line then
     rests on those markers' own orientation (a far marker's shape, which tells it weakly), and the cone, d m off it,
-    moves d mm a milliradian, its σ at least d × TILT_FLOOR_RAD; else ''."""
+    moves d mm a milliradian, its σ about d × TILT_FLOOR_RAD; else ''."""
     if len(seen) not in (1, 2):
         return ""
     names = sorted(seen)
@@ -424,7 +424,8 @@ def tilt_reason(rig: Rig, cone: str, seen: set[str]) -> str:
         f"the line through its topside markers at {names[0]} and {names[1]}"
     return (f"; it turns with the topside's tilt about {about}, which only their own orientation tells (a topside "
             f"marker at another cone would tell it by positions): {d:.0f} m off, each milliradian misread moves it "
-            f"{d:.0f} mm, and σ is at least {d * TILT_FLOOR_RAD * 1000:.0f} mm there")
+            f"{d:.0f} mm; the tracker allows that tilt {TILT_FLOOR_RAD * 1000:g} mrad at least: σ about "
+            f"{d * TILT_FLOOR_RAD * 1000:.0f} mm there")
 
 
 DEPTH_ALIGNED_DEG = 30.0  # a cone's least known direction within this of a camera's line of sight is its depth

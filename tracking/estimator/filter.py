@@ -290,8 +290,8 @@ class TopsideFilter(FilterState):
         is now; after the warm-up, at a cone whose pair a camera measures (measured, default: now), only its axes
         beyond the limit), or whose cameras are not yet compared; from the current state, with the placed cameras'
         poses (a past state's are relative to nominals since moved). A past state without its floors gets none. The
-        topside's turn about the axes the seen topside markers (seen, default: now) do not tell by their positions is
-        held to σ ≥ TILT_FLOOR_RAD (FilterState.tilt_floor)."""
+        topside's turn about the axes the seen topside markers (seen, default: seen_topside) do not tell by their
+        positions is held to σ ≥ TILT_FLOOR_RAD (FilterState.tilt_floor)."""
         poses = None if x is not None else CameraPoses(
             {name: (cam.T_jacket_camera, cam.index) for name, cam in self.cameras.items()
              if cam.T_jacket_camera is not None}, self.x[:self.body_size].copy())
@@ -312,11 +312,11 @@ class TopsideFilter(FilterState):
         out = []
         names, H = self.cone_rows
         covs = timeds = H @ P[:STATE, :STATE] @ H.transpose(0, 2, 1)  # (C, 3, 3)
+        tilt = self.tilt_floor(seen, P[3:6, 3:6])
+        if tilt is not None:  # first: the cameras' spread below is a floor on all of the σ
+            covs = timeds = covs + tilt
         if added.any():  # σ at least the cameras' spread (the filter's own σ may hold it already)
             covs = timeds = covs + np.fmax(added - np.diagonal(covs, axis1=1, axis2=2), 0.0)[:, :, None] * np.eye(3)
-        tilt = self.tilt_floor(seen, P[3:6, 3:6])
-        if tilt is not None:
-            covs = timeds = covs + tilt
         if clock:  # the estimate is the topside's at a time its cameras' clocks hold to σ: its motion over it
             speeds = H[:, :, :6] @ x[6:STATE]
             covs = covs + clock**2 * (speeds[:, :, None] * speeds[:, None, :]

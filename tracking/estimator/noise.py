@@ -24,9 +24,9 @@ MEASUREMENT_FLOOR_M = 0.01  # σ added to every measured position: biases corner
 # tilt, first-order rotation, timing); evidence in docs/method.md#the-filters-constants, as for the constants below
 ROTATION_FLOOR_RAD = 1e-3  # σ added to every measured body rotation, for the same reasons
 TILT_FLOOR_RAD = 1.5e-3  # the least σ of the topside's turn about an axis only its markers' orientation tells
-TILT_BASELINE_SIDES = 5.0  # seen topside markers spread less than this many marker sides across an axis (5 m for 1 m
-# markers) tell the topside's turn about it no better than TILT_FLOOR_RAD by their positions (a few mm over 5 m; a
-# 40 mm marker at 1 m is a 1 m marker at 25 m): FilterState.tilt_floor
+TILT_BASELINE_SIDES = 5.0  # seen topside markers whose RMS distance from an axis is less than this many marker sides
+# (5 m for 1 m markers: two cones 10 m apart, or one cone's faces) tell the topside's turn about it no better than
+# TILT_FLOOR_RAD by their positions (a few mm over 5 m; a 40 mm marker at 1 m is a 1 m marker at 25 m): tilt_floor
 REPORT_MAX_SIGMA_M = 0.05  # a cone whose offset σ exceeds this on any axis is reported as unknown (NaN): 3σ must fit
 # in the 150 mm concentricity tolerance for a number to be worth showing
 REPORT_WARMUP_S = 4.0  # for this long after the topside is placed, a cone is reported only when its σ is below
