@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from tracking.outputs import write_text
+
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 
 
@@ -14,6 +16,6 @@ def write_results(name: str, lines: list[str], echo: bool = False) -> Path:
         print(text)
     RESULTS_DIR.mkdir(parents=True, exist_ok=True)
     path = RESULTS_DIR / f"{name}.md"
-    path.write_text(text)
+    write_text(path, text)  # whole or not at all
     print(f"wrote {path}")
     return path

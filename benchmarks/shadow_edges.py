@@ -16,17 +16,16 @@ shadow sweeping with the topside's rocking does to the corners, frame after fram
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from benchmarks.corners import marker_pose
+from benchmarks.report import write_results
 from tests.synthetic import PAPER_K, PAPER_SIZE, WHITE, PlacedMarker, render, true_corners
 from tracking.camera import CameraModel
 from tracking.corners import refine_corners
 
-RESULTS = Path(__file__).resolve().parent / "results" / "shadow_edges.md"
 CELL_PX = (4.0, 8.0, 13.0)  # cell width in the image (13 px: random-10002's drone2, 107 px a side)
 DISTANCES_CELLS = (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)  # shadow edge beyond the right border
 SHADOW_DEPTH = 0.5  # share of the margin's brightness the shadow takes away
@@ -77,8 +76,8 @@ def run() -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def report(df: pd.DataFrame, seconds: float) -> str:
-    """The markdown report: per cell size and shadow distance, the border's error and drag."""
+def report(df: pd.DataFrame, seconds: float) -> list[str]:
+    """The markdown report's lines: per cell size and shadow distance, the border's error and drag."""
     g = df.groupby(["cell px", "shadow cells"]).agg(plain=("plain", "mean"), error=("error", "mean"),
                                                      spread=("error", "std"), drag=("per px", "mean"),
                                                      drag_max=("per px", lambda s: s.abs().max())).reset_index()
@@ -91,18 +90,14 @@ def report(df: pd.DataFrame, seconds: float) -> str:
     for r in g.itertuples():
         lines.append(f"| {r._1:.0f} | {r._2:.2f} | {r.plain:+.3f} | {r.error:+.3f} | {r.spread:.3f} | "
                      f"{r.drag:+.3f}; {r.drag_max:.3f} |")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def main() -> None:
     """Run, print and write the report."""
     t0 = time.perf_counter()
     df = run()
-    text = report(df, time.perf_counter() - t0)
-    print(text)
-    tmp = RESULTS.with_suffix(".md.partial")
-    tmp.write_text(text)
-    tmp.rename(RESULTS)
+    write_results("shadow_edges", report(df, time.perf_counter() - t0), echo=True)
 
 
 if __name__ == "__main__":

@@ -54,8 +54,9 @@ from tracking.errors import InputError
 from tracking.estimate import WITHHELD_BELOW, ConeEstimate, axes_withheld
 from tracking.estimator import TopsideFilter, cone_points, filter_frame, point_offset_matrix
 from tracking.estimator.filter import misread_warning
-from tracking.estimator.noise import MOUNT_MISMATCH, REPORT_MAX_SIGMA_M, STATE, TILT_FLOOR_RAD
-from tracking.estimator.state import topside_pose
+from tracking.estimator.noise import MOUNT_MISMATCH, REPORT_MAX_SIGMA_M, STATE, TILT_BASELINE_SIDES, TILT_FLOOR_RAD
+from tracking.estimator.state import topside_pose, untold_turn
+from tracking.geometry import skew
 from tracking.images import Frame, VideoHealth
 from tracking.mirror import seen_only_mirrored
 from tracking.offsets import BodyObservation, PairOffset
@@ -405,23 +406,22 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
 
 
 def tilt_reason(rig: Rig, cone: str, seen: set[str]) -> str:
-    """'; it turns with the topside's tilt about ...' for a cone without topside markers when those the cameras see sit
-    at one cone or two (at three, their positions tell every tilt): the topside's tilt about that point or line then
-    rests on those markers' own orientation (a far marker's shape, which tells it weakly), and the cone, d m off it,
-    moves d mm a milliradian, its σ about d × TILT_FLOOR_RAD; else ''."""
-    if len(seen) not in (1, 2):
+    """'; it turns with the topside's tilt about ...' for a cone without topside markers when the topside markers the
+    cameras see (at the cones seen) leave the topside's tilt about some axis to their own orientation (untold_turn, as
+    the filter finds it: one cone's markers, or two cones' line): the cone, d m off them across those axes, moves d mm
+    a milliradian, its σ about d × TILT_FLOOR_RAD; else ''."""
+    points = np.array([m.center for m in rig.markers if m.body == "topside" and m.cone in seen], dtype=float)
+    if not len(points):
         return ""
-    names = sorted(seen)
-    centres = [np.mean([m.center for m in rig.markers if m.body == "topside" and m.cone == c], axis=0) for c in names]
-    lever = cone_points(rig)[cone] - centres[0]
-    if len(centres) == 2:
-        axis = (centres[1] - centres[0]) / np.linalg.norm(centres[1] - centres[0])
-        lever = lever - (lever @ axis) * axis
-    d = float(np.linalg.norm(lever))
+    centre, axes = untold_turn(points, TILT_BASELINE_SIDES * rig.marker_size)
+    if not axes.shape[1]:
+        return ""
+    d = float(np.linalg.norm(skew(cone_points(rig)[cone] - centre) @ axes, 2))  # the most a unit turn moves it
     if d < TILT_NOTE_LEVER_M:
         return ""
+    names = sorted(seen)
     about = f"its topside marker at {names[0]}" if len(names) == 1 else \
-        f"the line through its topside markers at {names[0]} and {names[1]}"
+        f"the line through its topside markers at {' and '.join(names)}"
     return (f"; it turns with the topside's tilt about {about}, which only their own orientation tells (a topside "
             f"marker at another cone would tell it by positions): {d:.0f} m off, each milliradian misread moves it "
             f"{d:.0f} mm; the tracker allows that tilt {TILT_FLOOR_RAD * 1000:g} mrad at least: σ about "
