@@ -6,9 +6,11 @@ moves with the topside and drags that border's fitted line. This measures the dr
 1 m DICT_6X6_250 markers facing the camera (tests/synthetic.py, white all round, as the simulator's plates) with the
 cells CELL_PX wide and a 0.7 px blur, darkens everything beyond a line parallel to the right border by SHADOW_DEPTH of
 its brightness, the shadow's edge softened over SOFT_PX, at a distance from the border (in cells), and refines
-corners started 0.3 px off the truth with the default area edge. The right border's error is the mean x error of its
-two corners (+ = read outward, towards the shadow); "per px" is its change per pixel the shadow moves there (what a
-shadow sweeping with the topside's rocking does to the corners, frame after frame).
+corners started 0.3 px off the truth with the default area edge, as it is (levels read a few blur σ out where the
+cells are wide against the blur: tracking.corners._tight_edge) and as it was before that (levels half a cell, at most
+4 px, out). The right border's error is the mean x error of its two corners (+ = read outward, towards the shadow);
+"per px" is its change per pixel the shadow moves there (what a shadow sweeping over the plate does to the corners,
+frame after frame).
 
     .venv/bin/python -m benchmarks.shadow_edges    # ~1 min, writes benchmarks/results/shadow_edges.md
 """
@@ -20,6 +22,7 @@ import time
 import numpy as np
 import pandas as pd
 
+import tracking.corners
 from benchmarks.corners import marker_pose
 from benchmarks.report import write_results
 from tests.synthetic import PAPER_K, PAPER_SIZE, WHITE, PlacedMarker, render, true_corners
@@ -52,6 +55,24 @@ def right_border_error(gray: np.ndarray, truth: np.ndarray, start: np.ndarray, c
 
 
 def run() -> pd.DataFrame:
+    """One row per (cell size, distance, id, placement): the right border's error and its drag per pixel, as the
+    area edge is and with its levels half a cell out ("wide")."""
+    rows = pd.concat([_run(), _run_wide()], axis=1)
+    return rows.loc[:, ~rows.columns.duplicated()]
+
+
+def _run_wide() -> pd.DataFrame:
+    """_run with the levels half a cell out (the blur-matched window off), its columns suffixed " wide"."""
+    kept = tracking.corners.TIGHT_LEVEL_SIGMAS
+    tracking.corners.TIGHT_LEVEL_SIGMAS = np.inf  # never tighter than half a cell: the area edge before the window
+    try:
+        wide = _run()
+    finally:
+        tracking.corners.TIGHT_LEVEL_SIGMAS = kept
+    return wide.rename(columns={c: f"{c} wide" for c in ("plain", "error", "per px")})
+
+
+def _run() -> pd.DataFrame:
     """One row per (cell size, distance, id, placement): the right border's error and its drag per pixel."""
     rng = np.random.default_rng(SEED)
     camera = CameraModel(K=PAPER_K, dist=np.zeros(5), width=PAPER_SIZE[0], height=PAPER_SIZE[1])
@@ -78,18 +99,21 @@ def run() -> pd.DataFrame:
 
 def report(df: pd.DataFrame, seconds: float) -> list[str]:
     """The markdown report's lines: per cell size and shadow distance, the border's error and drag."""
-    g = df.groupby(["cell px", "shadow cells"]).agg(plain=("plain", "mean"), error=("error", "mean"),
-                                                     spread=("error", "std"), drag=("per px", "mean"),
-                                                     drag_max=("per px", lambda s: s.abs().max())).reset_index()
+    g = df.groupby(["cell px", "shadow cells"]).agg(
+        plain=("plain", "mean"), error=("error", "mean"), spread=("error", "std"), drag=("per px", "mean"),
+        drag_max=("per px", lambda s: s.abs().max()), error_wide=("error wide", "mean"),
+        drag_wide=("per px wide", "mean"), drag_max_wide=("per px wide", lambda s: s.abs().max())).reset_index()
     lines = ["# Shadow edges beside a marker's border", "", __doc__.split("\n\n")[1].strip(), "",
              f"{len(IDS)} ids × {PLACEMENTS} placements per row; shadow depth {SHADOW_DEPTH:.0%}, softness "
              f"{SOFT_PX} px, blur σ {BLUR_PX} px; run time {seconds:.0f} s.", "",
              "| cell px | shadow edge beyond the border [cells] | border error without shadow [px] | with it [px] "
-             "| spread [px] | drag per px the shadow moves (mean; largest) |",
-             "| ---: | ---: | ---: | ---: | ---: | --- |"]
+             "| spread [px] | drag per px the shadow moves (mean; largest) | levels half a cell out: with it [px] "
+             "| their drag (mean; largest) |",
+             "| ---: | ---: | ---: | ---: | ---: | --- | ---: | --- |"]
     for r in g.itertuples():
         lines.append(f"| {r._1:.0f} | {r._2:.2f} | {r.plain:+.3f} | {r.error:+.3f} | {r.spread:.3f} | "
-                     f"{r.drag:+.3f}; {r.drag_max:.3f} |")
+                     f"{r.drag:+.3f}; {r.drag_max:.3f} | {r.error_wide:+.3f} | {r.drag_wide:+.3f}; "
+                     f"{r.drag_max_wide:.3f} |")
     return lines
 
 

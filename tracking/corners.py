@@ -18,7 +18,11 @@ profile also samples the next cells in and out (1.5 cells from the edge); how mu
 reads beside its white code cells than beside its black ones gives the share of a neighbour's contrast the blur
 carries to the levels (the "glow", hence the marker's blur), and each level loses that share of its neighbour's
 contrast (_glow). That removes most of the bias wherever the blur is under a third of a cell; edges whose cells are
-under 2.5 px across (seen edge-on) are left alone. Figures: docs/method.md#detection-and-corners.
+under 2.5 px across (seen edge-on) are left alone. Where instead the cells are wide against the blur, the levels
+half a cell out reach past the edge's own step onto the margin, and a shadow's soft edge lying there (a beam's shadow
+sweeping over the plate) moves the white level and the edge with it; so each marker's blur is measured from its
+profiles' own spread and, where three of it fall short of half a cell, the edge is integrated again over 2.5 of it
+either side with its levels read 3 out (_tight_edge). Figures: docs/method.md#detection-and-corners.
 With blur_model (`--refine blurred`) the fine pass instead fits each profile with a blurred model of the marker's
 cross-section (inner cell, border, quiet cell, beyond), on markers whose cells are 2 to 8 px across (see the
 README).
@@ -51,6 +55,9 @@ MIN_GLOW_PROFILES = 2  # profiles next to a white and to a black code cell an ed
 MIN_GLOW, MAX_GLOW = 1e-4, 0.3  # the range of the share of a neighbouring cell's contrast taken for glow
 MIN_GLOW_CELL_PX = 2.5  # edges with thinner cells across (seen edge-on) neither measure the glow nor lose it: their
 # levels sit on their own edge's ramp, and their shares are mostly noise
+TIGHT_HALF_SIGMAS = 2.5  # where a cell is wide against the blur, the edge is integrated this many blur σ either side
+TIGHT_LEVEL_SIGMAS = 3.0  # ... and its levels read this far out: a shadow's soft edge on the margin then has to
+# come within about 3σ of the border, not half a cell (4 px), to pull it (benchmarks/shadow_edges.py)
 MAX_EXPONENT = 50.0  # exp() beyond this is a share of 0 anyway
 HALF_WINDOW = 0.42  # integration half-width across the edge, in cells
 HALF_WINDOW_MAX_PX = 3.0  # ... capped for large markers (wider windows only add noise)
@@ -227,7 +234,7 @@ def _fit_edges(gray: np.ndarray, ideal: np.ndarray, camera: CameraModel | None, 
     if coarse:
         e, found = _gradient_edge(values, step)
     else:
-        e, found = _area_edge(values, half, step, g.cell_across)
+        e, found = _area_edge(values, d, level, half, step, g.cell_across)
         found &= np.abs(e) < half[..., None]
         rows = np.flatnonzero(modelled.any(axis=1)) if modelled is not None else []
         if len(rows):  # the blurred-profile model on these markers' modelled edges
@@ -332,10 +339,12 @@ def _glow(inner: np.ndarray, black: np.ndarray, white: np.ndarray, cell: np.ndar
     return np.where((blur > 0) & (cell >= MIN_GLOW_CELL_PX), 1 / (1 + np.exp(reach)), 0.0)
 
 
-def _area_edge(values: np.ndarray, half: np.ndarray, step: np.ndarray, cell: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """Area edge offsets (B, 4, N) from [inner, black, profile..., white, outer] samples (B, 4, N, M+4), and which
-    are usable; the levels lose the glow of the cells beyond them (_glow)."""
+def _area_edge(values: np.ndarray, d: np.ndarray, level: np.ndarray, half: np.ndarray, step: np.ndarray,
+               cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Area edge offsets (B, 4, N) from [inner, black, profile at d (B, 4, M)..., white, outer] samples
+    (B, 4, N, M+4), the levels read at ∓level (B, 4), and which are usable; the levels lose the glow of the cells
+    beyond them (_glow), and where the blur is small against a cell the edge is taken again closer in (_tight_edge).
+    """
     inner, black, white, outer = values[..., 0], values[..., 1], values[..., -2], values[..., -1]
     glow = np.minimum(_glow(inner, black, white, cell), MAX_GLOW)[..., None]
     black = _smooth(black - glow * np.maximum(inner - black, 0.0))
@@ -345,7 +354,70 @@ def _area_edge(values: np.ndarray, half: np.ndarray, step: np.ndarray, cell: np.
     found = contrast > MIN_CONTRAST
     norm = (prof - black[..., None]) / np.where(found, contrast, 1.0)[..., None]
     area = step[..., None] * (norm.sum(axis=-1) - 0.5 * (norm[..., 0] + norm[..., -1]))
-    return half[..., None] - area, found
+    e = half[..., None] - area
+    return _tight_edge(values[..., 1:-1], d, level, half, e, _profile_blur(norm, d, e, found)), found
+
+
+def _tight_edge(values: np.ndarray, d: np.ndarray, level: np.ndarray, half: np.ndarray, e: np.ndarray,
+                blur: np.ndarray) -> np.ndarray:
+    """Edge offsets (B, 4, N): the area edges e integrated again over TIGHT_HALF_SIGMAS of each marker's blur (B, 1)
+    either side, their levels read TIGHT_LEVEL_SIGMAS out from the same [black, profile at d (B, 4, M)..., white]
+    samples (B, 4, N, M+2) (levels at ∓level (B, 4)), on the edges where that falls short of the levels and window
+    (half (B, 4)) the cell allows; e elsewhere. What lies on the margin further out (a shadow's soft edge sweeping
+    past) then no longer reaches the edge (benchmarks/shadow_edges.py).
+    """
+    tight_half = np.maximum(TIGHT_HALF_SIGMAS * blur, HALF_WINDOW_MIN_PX)
+    tight = (TIGHT_LEVEL_SIGMAS * blur < level) & (tight_half < half)  # (B, 4)
+    if not tight.any():
+        return e
+    xs = np.concatenate([-level[..., None], d, level[..., None]], axis=-1)  # (B, 4, M+2): the samples' offsets
+    reach = np.minimum(TIGHT_LEVEL_SIGMAS * blur, level)[..., None]  # (B, 4, 1)
+    centre = np.clip(e, -level[..., None] + reach, level[..., None] - reach)  # (B, 4, N)
+    black = _smooth(_interp(xs, values, centre - reach))
+    white = _smooth(_interp(xs, values, centre + reach))
+    contrast = white - black
+    found = contrast > MIN_CONTRAST
+    h = tight_half[..., None]
+    a = np.clip(centre - h, -half[..., None], half[..., None])
+    b = np.clip(centre + h, -half[..., None], half[..., None])
+    norm = (values - black[..., None]) / np.where(found, contrast, 1.0)[..., None]
+    return np.where(tight[..., None] & found, b - _integral(xs, norm, a, b), e)
+
+
+def _profile_blur(norm: np.ndarray, d: np.ndarray, e: np.ndarray, found: np.ndarray) -> np.ndarray:
+    """Each marker's blur (B, 1), px: the median over its usable profiles of the spread (RMS width) of their
+    normalised steps' gradient about their edges e (B, 4, N); profiles norm (B, 4, N, M) at offsets d (B, 4, M).
+    It includes the pixels' own width and the sampling's interpolation, as the profiles do."""
+    mid = 0.5 * (d[..., 1:] + d[..., :-1])[:, :, None, :]
+    rise = np.clip(np.diff(norm, axis=-1), 0.0, None)
+    mass = rise.sum(axis=-1)
+    var = (rise * (mid - e[..., None]) ** 2).sum(axis=-1) / np.maximum(mass, 1e-9)
+    ok = (found & (mass > 0.5)).reshape(len(norm), -1)
+    blur = np.sqrt(_masked_median(var.reshape(len(norm), -1), ok))
+    return np.where(np.isfinite(blur), blur, np.inf)[:, None]
+
+
+def _interp(xs: np.ndarray, ys: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Values (B, 4, N) at offsets at (B, 4, N) of profiles ys (B, 4, N, K) sampled at increasing xs (B, 4, K)."""
+    k = xs.shape[-1]
+    j = np.clip((xs[:, :, None, :] <= at[..., None]).sum(axis=-1) - 1, 0, k - 2)  # (B, 4, N): interval
+    x0 = np.take_along_axis(np.broadcast_to(xs[:, :, None, :], ys.shape), j[..., None], axis=-1)[..., 0]
+    x1 = np.take_along_axis(np.broadcast_to(xs[:, :, None, :], ys.shape), j[..., None] + 1, axis=-1)[..., 0]
+    y0 = np.take_along_axis(ys, j[..., None], axis=-1)[..., 0]
+    y1 = np.take_along_axis(ys, j[..., None] + 1, axis=-1)[..., 0]
+    t = np.clip((at - x0) / np.maximum(x1 - x0, 1e-12), 0.0, 1.0)
+    return y0 + t * (y1 - y0)
+
+
+def _integral(xs: np.ndarray, ys: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Integrals (B, 4, N) from a to b (B, 4, N) of the piecewise-linear profiles ys (B, 4, N, K) at xs (B, 4, K)."""
+    x0, x1 = xs[:, :, None, :-1], xs[:, :, None, 1:]
+    lo = np.clip(a[..., None], x0, x1)
+    hi = np.clip(b[..., None], x0, x1)
+    width = np.maximum(x1 - x0, 1e-12)
+    t = (0.5 * (lo + hi) - x0) / width  # where each interval's overlap is centred, 0..1
+    y0, y1 = ys[..., :-1], ys[..., 1:]
+    return ((hi - lo) * (y0 + t * (y1 - y0))).sum(axis=-1)
 
 
 def _masked_median(v: np.ndarray, ok: np.ndarray) -> np.ndarray:

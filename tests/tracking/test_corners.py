@@ -27,6 +27,10 @@ UNCORRECTED_MIN_SCALE = 3e-3  # the area edge without the glow correction: measu
 GLOW_MAX_SCALE = {WHITE: 2.5e-3,  # with it, white all round: measured +1.8 ‰ (without it +5.7 ‰)
                   BACKGROUND: 1.0e-3}  # one white cell then grey: -0.19 ‰ (without it -2.3 ‰, black side only -6.8 ‰)
 BLURRED_MAX_SCALE = 0.6e-3  # measured +0.18 ‰
+SHADOW_CELL_PX = 8.0  # cells in the image (benchmarks/results/shadow_edges.md's worst row) ...
+SHADOW_AT_CELLS = 0.5  # ... a soft shadow edge this far beyond the right border, taking half the margin's light
+SHADOW_MAX_PULL_PX = 0.3  # measured -0.16 px (mean of 4 ids); with the levels half a cell out -0.72 px
+SHADOW_MAX_DRAG = 0.1  # border px per px the shadow moves: measured 0.03; with the levels half a cell out 0.23
 GOLD_TOLERANCE_PX = 2.0  # gold corners are OpenCV's integer contour corners, ~0.5 px inward of the edges
 BARREL = np.array([-0.1, 0.05, 0.0, 0.0, 0.0])
 SLOTS = [(200, 170), (700, 170), (200, 430), (700, 430)]
@@ -125,6 +129,38 @@ def test_glow_correction_is_what_keeps_small_blurred_markers_at_their_size(monke
     small blurred markers large."""
     monkeypatch.setattr(tracking.corners, "_glow", lambda inner, black, white, cell: np.zeros_like(cell))
     assert _mean_scale(Refinement.EDGES, WHITE) > UNCORRECTED_MIN_SCALE
+
+
+def _shadow_pull(shift_px: float = 0.0) -> float:
+    """Mean x error (px) of the right border (TR, BR) of four sharp markers with SHADOW_CELL_PX cells under a soft
+    shadow edge SHADOW_AT_CELLS beyond it (plus shift_px), refined from starts 0.3 px off."""
+    rng = np.random.default_rng(11)
+    errors = []
+    for marker_id in (0, 7, 23, 42):
+        placed = PlacedMarker(marker_id, _pose(PAPER_K[0, 0] / 8 / SHADOW_CELL_PX, 0.0, rng.uniform(400, 520),
+                                               rng.uniform(260, 340), 0.0), 1.0)
+        gray = render(PAPER_K, np.zeros(5), PAPER_SIZE, [placed], blur=0.7, background=WHITE)
+        truth = true_corners(PAPER_K, np.zeros(5), placed)
+        edge = truth[[1, 2], 0].mean() + SHADOW_AT_CELLS * SHADOW_CELL_PX + shift_px
+        shade = 0.5 / (1.0 + np.exp(-(np.arange(gray.shape[1]) - edge) / 1.5))
+        shaded = np.clip(gray * (1.0 - shade)[None, :], 0, 255).astype(np.uint8)
+        found = refine_corners(shaded, truth + rng.normal(0, 0.3, truth.shape))
+        errors.append(np.mean(found[[1, 2], 0] - truth[[1, 2], 0]))
+    return float(np.mean(errors))
+
+
+def test_a_shadow_edge_on_the_margin_hardly_pulls_the_border() -> None:
+    """A shadow's soft edge half a cell beyond a border (a beam's shadow sweeping over the plate) neither pulls the
+    border far nor drags it along as it moves: the edge's levels are read a few blur σ out, not half a cell."""
+    pull = _shadow_pull()
+    assert abs(pull) < SHADOW_MAX_PULL_PX
+    assert abs(_shadow_pull(0.5) - pull) / 0.5 < SHADOW_MAX_DRAG
+
+
+def test_levels_half_a_cell_out_follow_the_shadow(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without the blur-matched window the same shadow pulls the border beyond the bound above."""
+    monkeypatch.setattr(tracking.corners, "TIGHT_LEVEL_SIGMAS", np.inf)
+    assert abs(_shadow_pull()) > SHADOW_MAX_PULL_PX
 
 
 def test_fails_gracefully() -> None:
