@@ -932,11 +932,13 @@ def test_a_turn_only_the_markers_orientation_tells_is_held_to_its_floor() -> Non
     assert abs(axis[1]) == pytest.approx(1.0) and untold_turn(corners[:2] / 25, 5.0)[1].shape[1] == 3  # in sides
 
 
-def test_cones_off_the_seen_markers_line_hold_the_tilt_floor_live_and_smoothed() -> None:
+def test_cones_off_the_seen_markers_line_hold_the_tilt_floor_live_and_smoothed(monkeypatch: pytest.MonkeyPatch
+                                                                              ) -> None:
     """Three cameras' corners of the pairs at A and D: B and C lie 24.5 m off the line through their topside markers,
-    about which only the markers' orientation tells the turn; their height's σ holds 1.5 mrad of it there, live and
-    smoothed (the smoother keeps each step's seen markers; without the floor 30-31 mm), and A's stays its own."""
-    floor = 1.5e-3  # rad, TILT_FLOOR_RAD as docs/method.md states it (the filter's own σ there is 30-31 mm)
+    about which only the markers' orientation tells the turn; their height's σ holds a floor of 1.5 mrad there, live
+    and smoothed (the smoother keeps each step's seen markers; without a floor 30-31 mm), and A's stays its own."""
+    floor = 1.5e-3  # rad: wider than the filter's own σ there, so that it binds (TILT_FLOOR_RAD's 0.75 mrad does not)
+    monkeypatch.setattr("tracking.estimator.state.TILT_FLOOR_RAD", floor)
     the_rig = camera_rig()
     measurements = observations(the_rig, 6.0)
     kf = TopsideFilter(the_rig)

@@ -23,7 +23,8 @@ AMBIGUOUS_VARIANCE_GAIN = 25.0  # σ × 5 for poses IPPE could not settle: their
 MEASUREMENT_FLOOR_M = 0.01  # σ added to every measured position: biases corner noise does not explain (far markers'
 # tilt, first-order rotation, timing); evidence in docs/method.md#the-filters-constants, as for the constants below
 ROTATION_FLOOR_RAD = 1e-3  # σ added to every measured body rotation, for the same reasons
-TILT_FLOOR_RAD = 1.5e-3  # the least σ of the topside's turn about an axis only its markers' orientation tells
+TILT_FLOOR_RAD = 0.75e-3  # the least σ of the topside's turn about an axis only its markers' orientation tells: the
+# slow (1 s) orientation error left on the campaign's worst view, a steep telephoto drone's (0.73 mrad RMS)
 TILT_BASELINE_SIDES = 5.0  # seen topside markers whose RMS distance from an axis is less than this many marker sides
 # (5 m for 1 m markers: two cones 10 m apart, or one cone's faces) tell the topside's turn about it no better than
 # TILT_FLOOR_RAD by their positions (a few mm over 5 m; a 40 mm marker at 1 m is a 1 m marker at 25 m): tilt_floor
@@ -48,7 +49,9 @@ VIEW_SHAPE_BIAS_PX = 0.04  # σ of the part of a corner's error that stays while
 # a cell): over 796 views of 114 random installations a view's whole-run mean error is 0.016 px at the median and
 # 0.045 px RMS (0.044 where the marker moves), up to 0.5 px where a plate's edge meets a dark leg
 # (benchmarks/results/corner_persistence.md). It grows as a cell thins across (0.13 px RMS under 2.5 px, 0.03 from
-# 4.5 px), but a filter given that much at a far camera's 2 px cells lost its depth (docs/method.md): one σ for all
+# 4.5 px), but a filter given that much at a far camera's 2 px cells lost its depth (docs/method.md): one σ for all.
+# Since the corners' blur-matched levels, 0.022 px RMS over 88 installations (0.020 moving); 0.025 px changed one cone
+# of 106 (docs/accuracy.md), so it stays
 VIEW_SHAPE_RENEW = 0.1  # that part renews as its image's shape changes: exp(-change / this) of it stays, change the
 # growth of the image's departure from the shape it had at the last reset (when the departure reached this), over its
 # size (a tenth: 10 % nearer, or turned 0.1 rad in the image); a shape that only trembles about one (a hovering drone)
