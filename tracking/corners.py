@@ -21,8 +21,9 @@ contrast (_glow). That removes most of the bias wherever the blur is under a thi
 under 2.5 px across (seen edge-on) are left alone. Where instead the cells are wide against the blur, the levels
 half a cell out reach past the edge's own step onto the margin, and a shadow's soft edge lying there (a beam's shadow
 sweeping over the plate) moves the white level and the edge with it; so each marker's blur is measured from its
-profiles' own spread and, where three of it fall short of half a cell, the edge is integrated again over 2.5 of it
-either side with its levels read 3 out (_tight_edge). Figures: docs/method.md#detection-and-corners.
+profiles' own spread and, where three of it fall short of the levels' distance (half a cell, at most 4 px) and 2.5
+of it of the window's half-width, the edge is integrated again over 2.5 of it either side with its levels read 3 out
+(_tight_edge). Figures: docs/method.md#detection-and-corners.
 With blur_model (`--refine blurred`) the fine pass instead fits each profile with a blurred model of the marker's
 cross-section (inner cell, border, quiet cell, beyond), on markers whose cells are 2 to 8 px across (see the
 README).
@@ -363,8 +364,10 @@ def _tight_edge(values: np.ndarray, d: np.ndarray, level: np.ndarray, half: np.n
     """Edge offsets (B, 4, N): the area edges e integrated again over TIGHT_HALF_SIGMAS of each marker's blur (B, 1)
     either side, their levels read TIGHT_LEVEL_SIGMAS out from the same [black, profile at d (B, 4, M)..., white]
     samples (B, 4, N, M+2) (levels at ∓level (B, 4)), on the edges where that falls short of the levels and window
-    (half (B, 4)) the cell allows; e elsewhere. What lies on the margin further out (a shadow's soft edge sweeping
-    past) then no longer reaches the edge (benchmarks/shadow_edges.py).
+    (half (B, 4)) the cell allows; e elsewhere, and where the tight levels' contrast is too low. The window (at least
+    HALF_WINDOW_MIN_PX) is centred on e, kept within ±half and its levels within ±level; the glow correction is not
+    applied (the next cells are far beyond those levels). What lies on the margin further out (a shadow's soft edge
+    sweeping past) then no longer reaches the edge (benchmarks/shadow_edges.py).
     """
     tight_half = np.maximum(TIGHT_HALF_SIGMAS * blur, HALF_WINDOW_MIN_PX)
     tight = (TIGHT_LEVEL_SIGMAS * blur < level) & (tight_half < half)  # (B, 4)
@@ -387,7 +390,9 @@ def _tight_edge(values: np.ndarray, d: np.ndarray, level: np.ndarray, half: np.n
 def _profile_blur(norm: np.ndarray, d: np.ndarray, e: np.ndarray, found: np.ndarray) -> np.ndarray:
     """Each marker's blur (B, 1), px: the median over its usable profiles of the spread (RMS width) of their
     normalised steps' gradient about their edges e (B, 4, N); profiles norm (B, 4, N, M) at offsets d (B, 4, M).
-    It includes the pixels' own width and the sampling's interpolation, as the profiles do."""
+    It includes the pixels' own width and the sampling's interpolation, as the profiles do (0.3 px of optics reads
+    about 0.5). Taken about e, which a shadow may have pulled, it reads wider there: a median over the four edges
+    holds against one such edge, not against most of them."""
     mid = 0.5 * (d[..., 1:] + d[..., :-1])[:, :, None, :]
     rise = np.clip(np.diff(norm, axis=-1), 0.0, None)
     mass = rise.sum(axis=-1)
