@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +25,7 @@ import pandas as pd
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+import tracking.corners  # noqa: E402
 from tests.synthetic import PAPER_K, PAPER_SIZE, PlacedMarker, render, true_corners  # noqa: E402
 from tracking.camera import CameraModel  # noqa: E402
 from tracking.corners import refine_corners_batch  # noqa: E402
@@ -86,6 +89,18 @@ def methods(dictionary: cv2.aruco.Dictionary) -> list[Method]:
     other = "none" if start != "none" else f"subpix{detector_parameters(Refinement.SUBPIX).cornerRefinementWinSize}"
     out.append(Method(f"edges from {other}", None, other))
     return out
+
+
+@contextmanager
+def levels_half_a_cell_out() -> Iterator[None]:
+    """Within it, the edge fit reads its levels half a cell out everywhere, as before the blur-matched window
+    (tracking.corners._tight_edge never applies); the shadow and real-corner benchmarks compare the two."""
+    kept = tracking.corners.TIGHT_LEVEL_SIGMAS
+    tracking.corners.TIGHT_LEVEL_SIGMAS = np.inf
+    try:
+        yield
+    finally:
+        tracking.corners.TIGHT_LEVEL_SIGMAS = kept
 
 
 def marker_pose(distance: float, angle: float, u: float, v: float, roll: float) -> np.ndarray:

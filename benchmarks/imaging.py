@@ -154,10 +154,7 @@ def main() -> None:
                   f"part: the σ of {WINDOW_S:g} s means beyond what white noise of that σ leaves.", "",
                   "| imaging | corner error [px] | rotation per frame [mrad] | slow part [mrad] |",
                   "| --- | ---: | ---: | ---: |", *corners]
-    if args.only is None:
-        write_results("imaging", lines, echo=True)
-    else:
-        print("\n".join(lines))
+    write_results("imaging", lines, echo=True, to_file=args.only is None)
 
 
 if __name__ == "__main__":

@@ -16,15 +16,18 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
+from contextlib import AbstractContextManager as ContextManager
+from contextlib import nullcontext
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-import tracking.corners
+from benchmarks.corners import levels_half_a_cell_out
 from benchmarks.report import write_results
-from tracking.caliscope import read_session
-from tracking.detection import MarkerDetector, Refinement
+from tracking.caliscope import SessionCamera, read_session
+from tracking.detection import MarkerDetection, MarkerDetector, Refinement
 from tracking.images import frames
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "caliscope"
@@ -33,13 +36,22 @@ MIN_MARKERS = 4  # markers a frame needs for its homography to leave something t
 VARIANTS = ("edges", "edges, levels half a cell out", "OpenCV subpix")
 
 
-def _detectors(dictionary: str, inverted: bool) -> dict[str, tuple[MarkerDetector, float]]:
-    """Each variant's detector and the TIGHT_LEVEL_SIGMAS it runs with."""
+def _detectors(dictionary: str, inverted: bool) -> dict[str, tuple[MarkerDetector, Callable[[], ContextManager]]]:
+    """Each variant's detector and the context it runs in."""
     edges = MarkerDetector(dictionary, Refinement.EDGES, inverted=inverted)
-    return {"edges": (edges, tracking.corners.TIGHT_LEVEL_SIGMAS),
-            "edges, levels half a cell out": (edges, np.inf),
-            "OpenCV subpix": (MarkerDetector(dictionary, Refinement.SUBPIX, inverted=inverted),
-                              tracking.corners.TIGHT_LEVEL_SIGMAS)}
+    return {"edges": (edges, nullcontext),
+            "edges, levels half a cell out": (edges, levels_half_a_cell_out),
+            "OpenCV subpix": (MarkerDetector(dictionary, Refinement.SUBPIX, inverted=inverted), nullcontext)}
+
+
+def plane_residual(markers: list[MarkerDetection], on_board: dict[int, np.ndarray], cam: SessionCamera) -> float:
+    """RMS (px) of what one homography from the markers' corners on the board leaves of their undistorted corners."""
+    src = np.concatenate([on_board[m.id] for m in markers])
+    seen = np.concatenate([m.corners for m in markers]).reshape(-1, 1, 2).astype(np.float64)
+    ideal = cv2.undistortPoints(seen, cam.K, cam.dist, P=cam.K).reshape(-1, 2)
+    H, _ = cv2.findHomography(src, ideal, 0)
+    fitted = cv2.perspectiveTransform(src.reshape(-1, 1, 2), H).reshape(-1, 2)
+    return float(np.sqrt(np.mean(np.sum((fitted - ideal) ** 2, axis=1))))
 
 
 def residuals(folder: Path) -> dict[tuple[int, str], np.ndarray]:
@@ -49,25 +61,14 @@ def residuals(folder: Path) -> dict[tuple[int, str], np.ndarray]:
     on_board = {int(i): np.asarray(c, dtype=np.float64)[:, :2]
                 for i, c in zip(np.asarray(board.getIds()).ravel(), board.getObjPoints(), strict=True)}
     detectors = _detectors(session.board.dictionary, session.board.inverted)
-    kept = tracking.corners.TIGHT_LEVEL_SIGMAS
     out: dict[tuple[int, str], list[float]] = {}
-    try:
-        for cam in session.cameras:
-            for frame in frames(cam.video):
-                for name, (detector, tight) in detectors.items():
-                    tracking.corners.TIGHT_LEVEL_SIGMAS = tight
+    for cam in session.cameras:
+        for frame in frames(cam.video):
+            for name, (detector, variant) in detectors.items():
+                with variant():
                     found = [m for m in detector.detect(frame.gray).markers if m.id in on_board]
-                    if len(found) < MIN_MARKERS:
-                        continue
-                    src = np.concatenate([on_board[m.id] for m in found])
-                    seen = np.concatenate([m.corners for m in found]).reshape(-1, 1, 2).astype(np.float64)
-                    ideal = cv2.undistortPoints(seen, cam.K, cam.dist, P=cam.K).reshape(-1, 2)
-                    H, _ = cv2.findHomography(src, ideal, 0)
-                    fitted = cv2.perspectiveTransform(src.reshape(-1, 1, 2), H).reshape(-1, 2)
-                    out.setdefault((cam.number, name), []).append(
-                        float(np.sqrt(np.mean(np.sum((fitted - ideal) ** 2, axis=1)))))
-    finally:
-        tracking.corners.TIGHT_LEVEL_SIGMAS = kept
+                if len(found) >= MIN_MARKERS:
+                    out.setdefault((cam.number, name), []).append(plane_residual(found, on_board, cam))
     return {k: np.array(v) for k, v in out.items()}
 
 
@@ -90,10 +91,7 @@ def main() -> None:
     lines = ["# Corner accuracy on real footage, without a truth", "", __doc__.split("\n\n")[1].strip(), "",
              f"Sessions: {', '.join(f.name for f in folders)}; run time {time.perf_counter() - t0:.0f} s.", "",
              *body]
-    if args.sessions is None:
-        write_results("real_corners", lines, echo=True)
-    else:
-        print("\n".join(lines))
+    write_results("real_corners", lines, echo=True, to_file=args.sessions is None)
 
 
 if __name__ == "__main__":

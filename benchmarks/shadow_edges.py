@@ -22,8 +22,7 @@ import time
 import numpy as np
 import pandas as pd
 
-import tracking.corners
-from benchmarks.corners import marker_pose
+from benchmarks.corners import levels_half_a_cell_out, marker_pose
 from benchmarks.report import write_results
 from tests.synthetic import PAPER_K, PAPER_SIZE, WHITE, PlacedMarker, render, true_corners
 from tracking.camera import CameraModel
@@ -63,12 +62,8 @@ def run() -> pd.DataFrame:
 
 def _run_wide() -> pd.DataFrame:
     """_run with the levels half a cell out (the blur-matched window off), its columns suffixed " wide"."""
-    kept = tracking.corners.TIGHT_LEVEL_SIGMAS
-    tracking.corners.TIGHT_LEVEL_SIGMAS = np.inf  # never tighter than half a cell: the area edge before the window
-    try:
+    with levels_half_a_cell_out():
         wide = _run()
-    finally:
-        tracking.corners.TIGHT_LEVEL_SIGMAS = kept
     return wide.rename(columns={c: f"{c} wide" for c in ("plain", "error", "per px")})
 
 

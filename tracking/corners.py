@@ -398,16 +398,16 @@ def _profile_blur(norm: np.ndarray, d: np.ndarray, e: np.ndarray, found: np.ndar
     mass = rise.sum(axis=-1)
     var = (rise * (mid - e[..., None]) ** 2).sum(axis=-1) / np.maximum(mass, 1e-9)
     ok = (found & (mass > 0.5)).reshape(len(norm), -1)
-    blur = np.sqrt(_masked_median(var.reshape(len(norm), -1), ok))
-    return np.where(np.isfinite(blur), blur, np.inf)[:, None]
+    return np.sqrt(_masked_median(var.reshape(len(norm), -1), ok))[:, None]  # inf where no profile is usable
 
 
 def _interp(xs: np.ndarray, ys: np.ndarray, at: np.ndarray) -> np.ndarray:
     """Values (B, 4, N) at offsets at (B, 4, N) of profiles ys (B, 4, N, K) sampled at increasing xs (B, 4, K)."""
     k = xs.shape[-1]
     j = np.clip((xs[:, :, None, :] <= at[..., None]).sum(axis=-1) - 1, 0, k - 2)  # (B, 4, N): interval
-    x0 = np.take_along_axis(np.broadcast_to(xs[:, :, None, :], ys.shape), j[..., None], axis=-1)[..., 0]
-    x1 = np.take_along_axis(np.broadcast_to(xs[:, :, None, :], ys.shape), j[..., None] + 1, axis=-1)[..., 0]
+    grid = np.broadcast_to(xs[:, :, None, :], ys.shape)
+    x0 = np.take_along_axis(grid, j[..., None], axis=-1)[..., 0]
+    x1 = np.take_along_axis(grid, j[..., None] + 1, axis=-1)[..., 0]
     y0 = np.take_along_axis(ys, j[..., None], axis=-1)[..., 0]
     y1 = np.take_along_axis(ys, j[..., None] + 1, axis=-1)[..., 0]
     t = np.clip((at - x0) / np.maximum(x1 - x0, 1e-12), 0.0, 1.0)
