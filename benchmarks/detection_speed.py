@@ -37,6 +37,7 @@ from tracking.camera import CameraModel, load_camera  # noqa: E402
 from tracking.detection import Detections, MarkerDetection, MarkerDetector  # noqa: E402
 from tracking.images import video_frames  # noqa: E402
 from tracking.marker_tracker import MarkerTracker  # noqa: E402
+from tracking.outputs import write_text  # noqa: E402
 from tracking.pose import estimate_pose  # noqa: E402
 from tracking.rig import Rig, load_rig  # noqa: E402
 
@@ -60,8 +61,8 @@ NOTES = """
   *Wrong ids*: detections of an id not in the frame or more than half a side away.
 - *median / 95th pct. frame*: of single frames' detection times; MarkerTracker's slow frames are its
   whole-frame searches (*whole-frame searches*: share of frames).
-- Timings are CPU time of one thread on a machine shared with other jobs (load ~10 on 2 CPUs);
-  repeats vary by ~10-20 %.
+- Timings are CPU time of one thread on a machine shared with other jobs (its load average is stated
+  above); repeats vary by ~10-20 %.
 """
 
 
@@ -226,10 +227,11 @@ def main() -> None:
     if args.quick:
         return
     frames = ", ".join(f"{s}: {r[METHODS[0]].frames} frames" for s, r in results.items())
-    RESULTS.write_text(
+    write_text(RESULTS,
         "# Detection speed and accuracy\n\n"
         f"Measured by `benchmarks/detection_speed.py` on {platform.machine()} ({len(os.sched_getaffinity(0))} "
-        f"CPUs visible, shared), {date.today().isoformat()}: {', '.join(SCENARIOS)} at 15 FPS ({frames}), "
+        f"CPUs visible, shared; load average {os.getloadavg()[1]:.1f} over the last 5 minutes), "
+        f"{date.today().isoformat()}: {', '.join(SCENARIOS)} at 15 FPS ({frames}), "
         f"single-threaded OpenCV, CPU time per frame (median of {repeats} repeats). Frames are decoded "
         "beforehand (decoding is not timed); '+ poses' adds IPPE poses of the rig's markers.\n\n"
         f"{text}\n{NOTES}")
