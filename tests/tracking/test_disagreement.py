@@ -1,12 +1,13 @@
 """The cameras' disagreement at a cone (tracking/estimator/disagreement.py): a floor under the cone's σ where cameras
-that carry the estimate disagree beyond their noise, nothing where they agree or where a poor view disagrees alone."""
+that carry the estimate disagree beyond their noise, nothing where they agree or where a poor view disagrees alone;
+and the error their calibrations state, which no number of their frames averages away."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tracking.estimator.disagreement import DISAGREEMENT_WAIT_S, Disagreement
+from tracking.estimator.disagreement import DISAGREEMENT_WAIT_S, LENS_SHARE, Disagreement
 from tracking.estimator.state import STATE, point_offset_matrix
 from tracking.offsets import BodyObservation
 from tracking.pose import BodyPose, Choice
@@ -24,8 +25,9 @@ def cone() -> Disagreement:
 
 
 def view(camera: str, time: float, offset_m: np.ndarray, sigma_m: float = 0.5 * MM,
-         choice: Choice = Choice.UNIQUE) -> BodyObservation:
-    """A camera frame 20 m from the markers whose two fits put the topside offset_m (3,) from the jacket."""
+         choice: Choice = Choice.UNIQUE, model_px: float = 0.0) -> BodyObservation:
+    """A camera frame 20 m from the markers (f 2000 px, its calibration model_px off) whose two fits put the topside
+    offset_m (3,) from the jacket."""
     T_cj = np.eye(4)
     T_cj[:3, 3] = [0.0, 0.0, 20.0]
     T_jt = np.eye(4)
@@ -33,7 +35,7 @@ def view(camera: str, time: float, offset_m: np.ndarray, sigma_m: float = 0.5 * 
     cov = np.diag([1e-8] * 3 + [sigma_m**2 / 2] * 3)
     jacket = BodyPose("jacket", (1,), T_cj, cov, 0.1, Choice.UNIQUE)
     topside = BodyPose("topside", (2,), T_cj @ T_jt, cov, 0.1, choice)
-    return BodyObservation(time, camera, jacket, topside)
+    return BodyObservation(time, camera, jacket, topside, K=np.diag([2000.0, 2000.0, 1.0]), model_px=model_px)
 
 
 def keep(d: Disagreement, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None) -> None:
@@ -149,3 +151,27 @@ def test_a_frames_residual_is_its_own_offset_at_the_cone_less_the_filters() -> N
     own = np.zeros(STATE)
     own[:3], own[3:6] = q[3:], q[:3]
     np.testing.assert_allclose(d.moments[("a", "A")].mean, point_offset_matrix(c) @ (own - x[:STATE]), atol=1e-9)
+
+
+def test_a_calibrations_stated_error_floors_the_cone_across_the_line_of_sight() -> None:
+    """A camera alone whose calibration misses by 0.5 px, its markers 20 m along its axis at f 2000 px: the two images
+    0.5 px off each, apart, put the offset √2 × 5 mm off across the line of sight (x, y here), nothing along it; two
+    such cameras with equal weight, half that variance; a calibration stating no error, nothing."""
+    side = np.sqrt(2.0) * LENS_SHARE * 0.5 * 20.0 / 2000.0
+    d = cone()
+    t = 0.0
+    for i in range(30):
+        t = i / RATE_HZ
+        keep(d, view("a", t, np.zeros(3), model_px=0.5), X, P)
+    floors, _ = d.floors(t)
+    assert np.sqrt(floors[0, :2]) == pytest.approx([side, side], rel=0.01)
+    assert floors[0, 2] == pytest.approx(0.0, abs=1e-12)
+    pair = cone()
+    for i in range(30):
+        for camera in ("a", "b"):
+            keep(pair, view(camera, i / RATE_HZ, np.zeros(3), model_px=0.5), X, P)
+    floors, _ = pair.floors(29 / RATE_HZ)
+    assert floors[0, :2] == pytest.approx([side**2 / 2] * 2, rel=0.01)
+    exact = cone()
+    keep(exact, view("a", 0.0, np.zeros(3)), X, P)
+    assert np.array_equal(exact.floors(0.0)[0], np.zeros((1, 3)))

@@ -46,6 +46,10 @@ DISAGREEMENT_MIN_SHARE = 0.1  # a camera whose frames carry less of a cone's est
 DISAGREEMENT_WINDOW_S = 2.0  # a camera counts for a cone while its last frame of it is this recent
 DISAGREEMENT_WAIT_S = 0.5  # a cone waits this long at most for a camera new to it to be compared (a camera whose fits
 # are ambiguous, or that shows the cone for a frame or two, must not hide it for long)
+LENS_SHARE = 1.0  # a camera whose calibration misses its own points by model_px RMS misses where a marker's image
+# lies by as much, for as long as the marker stays where it is in the picture; its two markers' misses taken apart,
+# the cone's offset from that camera is off by √2 that across its line of sight, which no number of its frames
+# averages away
 DISAGREEMENT_P = 0.95  # the cameras' means must scatter beyond what their noise gives at this probability (χ² over
 # cameras - 1 degrees of freedom) before their spread counts: unbiased cameras must not widen σ by chance
 
@@ -61,13 +65,15 @@ class _Moments:
     w2: float = 0.0  # Σ weights²
     s1: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r
     s2: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r²
+    s_lens: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w lens: its calibration's share, m²
 
-    def add(self, time: float, r: np.ndarray, weight: float) -> None:
+    def add(self, time: float, r: np.ndarray, weight: float, lens: np.ndarray) -> None:
         k = float(np.exp(-max(0.0, time - self.time) / DISAGREEMENT_TAU_S))
         self.count = k * self.count + 1.0
         self.known = self.known or self.count >= DISAGREEMENT_MIN_FRAMES
         self.w, self.w2 = k * self.w + weight, k * k * self.w2 + weight * weight
         self.s1, self.s2 = k * self.s1 + weight * r, k * self.s2 + weight * r * r
+        self.s_lens = k * self.s_lens + weight * lens
         self.time = time
 
     @property
@@ -78,6 +84,11 @@ class _Moments:
     @property
     def mean(self) -> np.ndarray:
         return self.s1 / self.w
+
+    @property
+    def lens(self) -> np.ndarray:
+        """(3,) variance its calibration's error gives its offset at the cone, m² (weighted as its residuals)."""
+        return self.s_lens / self.w
 
     @property
     def scatter(self) -> np.ndarray:
@@ -92,13 +103,13 @@ class _Moments:
 
 @dataclass(frozen=True)
 class Residuals:
-    """One camera frame's view of the cones: those its two fits show (indices), and its residual (3,) and weight (1 /
-    σ²) at each where the filter had an estimate."""
+    """One camera frame's view of the cones: those its two fits show (indices), and its residual (3,), weight (1 /
+    σ²) and the variance (3,) its calibration's error gives there, at each where the filter had an estimate."""
 
     camera: str
     time: float
     seen: list[int]
-    residuals: list[tuple[int, np.ndarray, float]]
+    residuals: list[tuple[int, np.ndarray, float, np.ndarray]]
 
 
 @dataclass
@@ -128,9 +139,10 @@ class Disagreement:
         return Residuals(o.camera, o.time, seen, self._posed(o, seen, x, P))
 
     def _posed(self, o: BodyObservation, seen: list[int], x: np.ndarray, P: np.ndarray
-               ) -> list[tuple[int, np.ndarray, float]]:
+               ) -> list[tuple[int, np.ndarray, float, np.ndarray]]:
         """Residuals at the cones from the frame's T_jacket_topside (its two fits), linear in the pose as the
-        filter's offsets are (point_offset_matrix), with their σ² from the fits' covariances (first order)."""
+        filter's offsets are (point_offset_matrix), with their σ² from the fits' covariances (first order), and the
+        variance per axis the camera's calibration error gives there (_lens_at)."""
         assert o.jacket is not None and o.topside is not None
         T = inverse(o.jacket.T_camera_body) @ o.topside.T_camera_body
         own = np.zeros(STATE)
@@ -140,9 +152,11 @@ class Disagreement:
         H = self.H[seen]  # (S, 3, 12)
         fits = np.einsum("sij,jk,sik->s", H[:, :, :6], cov, H[:, :, :6])  # traces: the fits' σ² at each cone
         filtered = np.einsum("sij,jk,sik->s", H, P[:STATE, :STATE], H)  # and the filter's own
+        lens = np.diag(_lens_at(o))  # (3,) the same at every cone the frame shows (a pair's markers are near)
         residuals = H @ (own - x[:STATE])
-        return [(k, residuals[i], 1.0 / v) for i, (k, v) in enumerate(zip(seen, fits + filtered, strict=True))
-                if np.isfinite(v) and v > 1e-18 and np.isfinite(residuals[i]).all()]  # a NaN would stay for good
+        return [(k, residuals[i], 1.0 / v, lens) for i, (k, v) in enumerate(zip(seen, fits + filtered, strict=True))
+                if np.isfinite(v) and v > 1e-18 and np.isfinite(residuals[i]).all()
+                and np.isfinite(lens).all()]  # a NaN would stay for good
 
     def record(self, r: Residuals) -> None:
         """Keep a frame's residuals: the filter used its topside corners (a view it refused makes no estimate)."""
@@ -150,30 +164,32 @@ class Disagreement:
             key = (r.camera, self.names[k])
             self.by_cone.setdefault(k, {})[r.camera] = r.time
             self.first_seen.setdefault(key, r.time)
-        for k, residual, weight in r.residuals:
+        for k, residual, weight, lens in r.residuals:
             key = (r.camera, self.names[k])
             if key not in self.moments:
                 self.moments[key] = _Moments(r.time)
-            self.moments[key].add(r.time, residual, weight)
+            self.moments[key].add(r.time, residual, weight, lens)
             self.versions[k] = self.versions.get(k, 0) + 1
 
     def floors(self, time: float) -> tuple[np.ndarray, np.ndarray]:
-        """(C, 3) variance, m², each cone's σ² is at least for its cameras' disagreement at a time; and (C,) whether a
-        cone waits for a camera new to it to be compared (DISAGREEMENT_WAIT_S at most)."""
+        """(C, 3) variance, m², each cone's σ² is at least for its cameras' disagreement at a time, or for their
+        calibrations' error where that is more (_lens); and (C,) whether a cone waits for a camera new to it to be
+        compared (DISAGREEMENT_WAIT_S at most)."""
         out, pending = np.zeros((len(self.names), 3)), np.zeros(len(self.names), dtype=bool)
         for k, cameras in self.by_cone.items():
             recent = [c for c, t in cameras.items() if time - t <= DISAGREEMENT_WINDOW_S]
-            if len(recent) < 2:
-                continue
             cone = self.names[k]
             ms = {c: self.moments.get((c, cone)) for c in recent}
+            out[k] = _lens([m for m in ms.values() if m is not None and m.w > 0.0])
+            if len(recent) < 2:
+                continue
             pending[k] = any((m is None or not m.known) and time - self.first_seen[(c, cone)] <= DISAGREEMENT_WAIT_S
                              for c, m in ms.items())  # a camera new to the cone whose noise is not known yet
             compared = {c: m for c, m in ms.items() if m is not None and m.count >= DISAGREEMENT_MIN_FRAMES}
             key = (tuple(compared), self.versions.get(k, 0))
             if self._cache.get(k, (None,))[0] != key:  # the moments changed since: compare again
                 self._cache[k] = (key, _compared(list(compared.values())))
-            out[k] = self._cache[k][1]
+            out[k] = np.maximum(out[k], self._cache[k][1])
         return out, pending
 
 
@@ -196,6 +212,30 @@ def _turn(rvec: np.ndarray) -> np.ndarray:
     R, dR = rotation_jacobian_of(rvec)
     turns = dR @ R.T  # (3, 3, 3): [φ_k]× per rotation-vector component
     return np.stack([turns[:, 2, 1], turns[:, 0, 2], turns[:, 1, 0]])  # rows: φ's axes; columns: δrvec's
+
+
+def _lens_at(o: BodyObservation) -> np.ndarray:
+    """(3, 3) covariance, jacket frame, m², of a frame's T_jacket_topside offset that its camera's calibration error
+    gives: LENS_SHARE × model_px on each of its two bodies' images, apart, across the line of sight to the topside at
+    its depth (s² (I - l lᵀ), s = √2 LENS_SHARE model_px Z / f); nothing where the calibration states no error."""
+    assert o.jacket is not None and o.topside is not None
+    t = o.topside.T_camera_body[:3, 3]
+    depth = float(np.linalg.norm(t))
+    if not o.model_px > 0.0 or not depth > 0.0:
+        return np.zeros((3, 3))
+    sight = o.jacket.T_camera_body[:3, :3].T @ (t / depth)  # the line of sight in the jacket frame
+    s = np.sqrt(2.0) * LENS_SHARE * o.model_px * float(t[2]) / float(o.K[0, 0])
+    return s * s * (np.eye(3) - np.outer(sight, sight))
+
+
+def _lens(ms: list[_Moments]) -> np.ndarray:
+    """(3,) variance of the estimate's error its cameras' calibrations give, m²: each camera's, in its share of the
+    estimate (its residuals' weight), squared; a camera alone gives all of its own."""
+    if not ms:
+        return np.zeros(3)
+    w = np.array([m.w for m in ms])
+    shares = w / w.sum()
+    return (shares**2) @ np.array([m.lens for m in ms])
 
 
 def _compared(ms: list[_Moments]) -> np.ndarray:
