@@ -53,6 +53,7 @@ from tracking.disagreements import (
 from tracking.errors import InputError
 from tracking.estimate import WITHHELD_BELOW, ConeEstimate, axes_withheld
 from tracking.estimator import TopsideFilter, cone_points, filter_frame, point_offset_matrix
+from tracking.estimator.disagreement import lens_sigmas
 from tracking.estimator.filter import misread_warning
 from tracking.estimator.noise import MOUNT_MISMATCH, REPORT_MAX_SIGMA_M, STATE, TILT_BASELINE_SIDES, TILT_FLOOR_RAD
 from tracking.estimator.state import topside_pose, untold_turn
@@ -363,8 +364,10 @@ def fuse(rig: Rig, results: list[FrameResult]) -> tuple[TopsideFilter, list[Cone
     return kf, last
 
 
-def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSight]) -> list[ConeCheck]:
-    """A verdict per cone from its σ (the filter's covariance) and the cameras that see a topside marker at it."""
+def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSight],
+                lens: Callable[[str, float], str] = lambda cone, worst: "") -> list[ConeCheck]:
+    """A verdict per cone from its σ (the filter's covariance) and the cameras that see a topside marker at it; lens
+    names a camera whose stated calibration error holds a cone's σ up (lens_reason)."""
     by_id = rig.marker_by_id
     topside = [s for s in sights if s.counts and by_id[s.marker].body == "topside"]
     everyone = tuple(sorted({s.camera for s in topside}))
@@ -382,7 +385,8 @@ def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSigh
         source = (f"seen by {', '.join(cameras)}" if has_markers and cameras else
                   f"no camera sees a topside marker at {cone}" if has_markers else
                   f"no marker at {cone}: from the topside's rigid pose through {', '.join(everyone) or 'no camera'}")
-        why = depth_reason(e, cameras, rig, cone) if e is not None and worst > READY_MAX_SIGMA_M else ""
+        why = depth_reason(e, cameras, rig, cone) + lens(cone, worst) if e is not None and \
+            worst > READY_MAX_SIGMA_M else ""
         if not has_markers:
             why += tilt_reason(rig, cone, {c for s in topside if (c := by_id[s.marker].cone) is not None})
         if not np.isfinite(worst):
@@ -449,6 +453,23 @@ def depth_reason(e: ConeEstimate, cameras: tuple[str, ...], rig: Rig, cone: str)
             "measure that axis")
 
 
+LENS_NOTE_SHARE = 0.5  # a camera's calibration is named when what its stated error alone leaves is this much of σ
+
+
+def lens_reason(lens: dict[str, np.ndarray], model_px: dict[str, float], worst: float) -> str:
+    """'; CAM's calibration states ... px ...' when the σ one camera's stated calibration error alone gives a cone
+    (lens: camera -> (3,) m, tracking.estimator.disagreement.lens_sigmas) is LENS_NOTE_SHARE of its worst σ or more,
+    else ''."""
+    if not lens:
+        return ""
+    camera, sigma = max(lens.items(), key=lambda item: float(item[1].max()))
+    if not float(sigma.max()) >= LENS_NOTE_SHARE * worst:
+        return ""
+    return (f"; {camera}'s calibration states {model_px.get(camera, 0.0):.2f} px RMS error, which alone leaves "
+            f"σ {float(sigma.max()) * 1000:.0f} mm across its line of sight (no number of frames averages it away): "
+            "a better calibration, a longer lens or a second camera would lower it")
+
+
 def misread_markers(kf: TopsideFilter) -> list[str]:
     """One line per view the filter found misread beyond its corners' prior (measurements.misread)."""
     return [misread_warning(camera, marker, v.misread_px) for (camera, marker), v in sorted(kf.views.items())
@@ -512,5 +533,7 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
     below = {e.cone: float((point_offset_matrix(cone_points(rig)[e.cone]) @ kf.x[:STATE])[2]) for e in estimates
              if e.withheld == WITHHELD_BELOW}  # the offset the filter withheld, at the end
     topside = topside_pose(kf.x) if kf.topside_placed else None
-    return CheckReport(rig, seconds, cameras, disagreements, cone_checks(rig, estimates, sights), warnings, topside,
-                       kf.scale, below)
+    model_px = {name: cam.model_px for name, cam in kf.cameras.items()}
+    checks = cone_checks(rig, estimates, sights,
+                         lambda cone, worst: lens_reason(lens_sigmas(kf.disagreement, cone), model_px, worst))
+    return CheckReport(rig, seconds, cameras, disagreements, checks, warnings, topside, kf.scale, below)

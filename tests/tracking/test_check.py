@@ -427,3 +427,33 @@ def test_a_single_cameras_depth_is_named_as_the_reason(clip: Path) -> None:
     assert depth_reason(across, ("stern_A",), rig, "A") == ""
     assert depth_reason(estimate, ("stern_A", "drone_A"), rig, "A") == ""
 
+
+
+def test_a_calibrations_stated_error_is_named_where_it_holds_the_cone_up() -> None:
+    """The camera whose stated calibration error alone leaves the most of a cone's σ is named, with that σ, when it
+    is half the σ or more; nothing otherwise."""
+    from tracking.check import LENS_NOTE_SHARE, lens_reason
+
+    lens = {"cam_1": np.array([0.03, 0.02, 0.0]), "cam_2": np.array([0.005, 0.005, 0.005])}
+    model_px = {"cam_1": 0.9, "cam_2": 0.3}
+    text = lens_reason(lens, model_px, worst=0.04)
+    assert "cam_1's calibration states 0.90 px RMS error" in text and "σ 30 mm" in text
+    assert lens_reason(lens, model_px, worst=0.031 / LENS_NOTE_SHARE) == ""
+    assert lens_reason({}, model_px, worst=0.04) == ""
+
+
+def test_a_poor_calibration_is_named_as_the_reason(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:
+    """Every camera's calibration stating 2 px of error (a poor one): the cones' σ is mostly what that leaves, and
+    the reason names a camera's calibration; the clip's own (no error stated) names none."""
+    rms_px = 2.0
+    rig = load_rig(rig_file(clip, tmp_path))
+    again = {}
+    for name, run in runs.items():
+        entry = next(c for c in rig.cameras if c.name == name)
+        tracker = CameraTracker(rig, entry, dataclasses.replace(run.tracker.camera, rms=rms_px),
+                                run.tracker.detector)
+        again[name] = dataclasses.replace(run, tracker=tracker,
+                                          results=[tracker.measure(r.frame, r.detections) for r in run.results])
+    poor = check_runs(rig, again, SECONDS)
+    assert any(f"calibration states {rms_px:.2f} px RMS error" in c.reason for c in poor.cones)
+    assert not any("calibration states" in c.reason for c in check_runs(rig, runs, SECONDS).cones)

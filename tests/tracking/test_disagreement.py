@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tracking.estimator.disagreement import DISAGREEMENT_WAIT_S, LENS_SHARE, Disagreement
+from tracking.estimator.disagreement import DISAGREEMENT_WAIT_S, LENS_SHARE, Disagreement, lens_sigmas
 from tracking.estimator.state import STATE, point_offset_matrix
 from tracking.offsets import BodyObservation
 from tracking.pose import BodyPose, Choice
@@ -166,6 +166,7 @@ def test_a_calibrations_stated_error_floors_the_cone_across_the_line_of_sight() 
     floors, _ = d.floors(t)
     assert np.sqrt(floors[0, :2]) == pytest.approx([side, side], rel=0.01)
     assert floors[0, 2] == pytest.approx(0.0, abs=1e-12)
+    assert lens_sigmas(d, "A")["a"] == pytest.approx([side, side, 0.0], abs=side * 0.01)  # what check names
     pair = cone()
     for i in range(30):
         for camera in ("a", "b"):

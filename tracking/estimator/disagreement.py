@@ -193,6 +193,12 @@ class Disagreement:
         return out, pending
 
 
+def lens_sigmas(d: Disagreement, cone: str) -> dict[str, np.ndarray]:
+    """Per camera that has shown a cone's pair, the σ (3,) its calibration's stated error alone gives the cone's offset
+    there, m (_lens_at, as its frames weighed it)."""
+    return {c: np.sqrt(m.lens) for (c, k), m in d.moments.items() if k == cone and m.w > 0.0}
+
+
 def relative_pose_jacobian(T_camera_jacket: np.ndarray, T_camera_topside: np.ndarray) -> np.ndarray:
     """(6, 12) first-order change of T_jacket_topside = T_camera_jacket⁻¹ T_camera_topside, as its translation and a
     rotation vector turning it in the jacket frame, with the two poses' (rvec, tvec) each (the fits' covariances'
