@@ -457,17 +457,17 @@ LENS_NOTE_SHARE = 0.5  # a camera's calibration is named when what its stated er
 
 
 def lens_reason(lens: dict[str, np.ndarray], model_px: dict[str, float], worst: float) -> str:
-    """'; CAM's calibration states ... px ...' when the σ one camera's stated calibration error alone gives a cone
-    (lens: camera -> (3,) m, tracking.estimator.disagreement.lens_sigmas) is LENS_NOTE_SHARE of its worst σ or more,
-    else ''."""
+    """'; CAM's calibration states ... px ...' when the σ one camera's stated calibration error alone gives a cone's
+    estimate (lens: camera -> (3,) m, in its share, tracking.estimator.disagreement.lens_sigmas) is LENS_NOTE_SHARE
+    of its worst σ or more, else ''."""
     if not lens:
         return ""
     camera, sigma = max(lens.items(), key=lambda item: float(item[1].max()))
     if not float(sigma.max()) >= LENS_NOTE_SHARE * worst:
         return ""
     return (f"; {camera}'s calibration states {model_px.get(camera, 0.0):.2f} px RMS error, which alone leaves "
-            f"σ {float(sigma.max()) * 1000:.0f} mm across its line of sight (no number of frames averages it away): "
-            "a better calibration, a longer lens or a second camera would lower it")
+            f"σ {float(sigma.max()) * 1000:.0f} mm in the estimate, across its line of sight (no number of frames "
+            "averages it away): a better calibration, a longer lens or a second camera would lower it")
 
 
 def misread_markers(kf: TopsideFilter) -> list[str]:
@@ -535,5 +535,6 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
     topside = topside_pose(kf.x) if kf.topside_placed else None
     model_px = {name: cam.model_px for name, cam in kf.cameras.items()}
     checks = cone_checks(rig, estimates, sights,
-                         lambda cone, worst: lens_reason(lens_sigmas(kf.disagreement, cone), model_px, worst))
+                         lambda cone, worst: lens_reason(lens_sigmas(kf.disagreement, cone, kf.time or 0.0),
+                                                         model_px, worst))
     return CheckReport(rig, seconds, cameras, disagreements, checks, warnings, topside, kf.scale, below)

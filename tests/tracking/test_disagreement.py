@@ -154,25 +154,33 @@ def test_a_frames_residual_is_its_own_offset_at_the_cone_less_the_filters() -> N
 
 
 def test_a_calibrations_stated_error_floors_the_cone_across_the_line_of_sight() -> None:
-    """A camera alone whose calibration misses by 0.5 px, its markers 20 m along its axis at f 2000 px: the two images
-    0.5 px off each, apart, put the offset √2 × 5 mm off across the line of sight (x, y here), nothing along it; two
-    such cameras with equal weight, half that variance; a calibration stating no error, nothing."""
-    side = np.sqrt(2.0) * LENS_SHARE * 0.5 * 20.0 / 2000.0
-    d = cone()
+    """A camera alone whose calibration misses by 0.5 px (its RMS), 20 m from its markers at f 2000 px, cone A 5 m
+    off its axis: the two images, each 0.5 px off an axis, apart, put the offset √2 × 5 mm × depth / 20 m off an axis
+    across the line of sight to the cone, nothing along it; two such cameras with equal weight, half that variance;
+    a calibration stating no error, nothing."""
+    point = np.array([5.0, 0.0, 0.0])  # cone A in the jacket frame; the camera looks along the jacket's z
+
+    def off_axis() -> Disagreement:
+        return Disagreement(["A"], point_offset_matrix(point)[None], {"A": [(1, 2)]})
+
+    in_camera = point + np.array([0.0, 0.0, 20.0])
+    sight = in_camera / np.linalg.norm(in_camera)
+    expected = (LENS_SHARE * 0.5 * in_camera[2] / 2000.0) ** 2 * (1.0 - sight**2)  # s² (I - l lᵀ)'s diagonal
+    d = off_axis()
     t = 0.0
     for i in range(30):
         t = i / RATE_HZ
         keep(d, view("a", t, np.zeros(3), model_px=0.5), X, P)
     floors, _ = d.floors(t)
-    assert np.sqrt(floors[0, :2]) == pytest.approx([side, side], rel=0.01)
-    assert floors[0, 2] == pytest.approx(0.0, abs=1e-12)
-    assert lens_sigmas(d, "A")["a"] == pytest.approx([side, side, 0.0], abs=side * 0.01)  # what check names
-    pair = cone()
+    assert floors[0] == pytest.approx(expected, rel=0.01)
+    assert lens_sigmas(d, "A", t)["a"] == pytest.approx(np.sqrt(expected), rel=0.01)  # what check names
+    assert d.floors(t + 60.0)[0][0] == pytest.approx(expected, rel=0.01)  # its error stays when it looks away
+    pair = off_axis()
     for i in range(30):
         for camera in ("a", "b"):
             keep(pair, view(camera, i / RATE_HZ, np.zeros(3), model_px=0.5), X, P)
     floors, _ = pair.floors(29 / RATE_HZ)
-    assert floors[0, :2] == pytest.approx([side**2 / 2] * 2, rel=0.01)
-    exact = cone()
+    assert floors[0] == pytest.approx(expected / 2, rel=0.01)
+    exact = off_axis()
     keep(exact, view("a", 0.0, np.zeros(3)), X, P)
     assert np.array_equal(exact.floors(0.0)[0], np.zeros((1, 3)))

@@ -46,10 +46,12 @@ DISAGREEMENT_MIN_SHARE = 0.1  # a camera whose frames carry less of a cone's est
 DISAGREEMENT_WINDOW_S = 2.0  # a camera counts for a cone while its last frame of it is this recent
 DISAGREEMENT_WAIT_S = 0.5  # a cone waits this long at most for a camera new to it to be compared (a camera whose fits
 # are ambiguous, or that shows the cone for a frame or two, must not hide it for long)
-LENS_SHARE = 1.0  # a camera whose calibration misses its own points by model_px RMS misses where a marker's image
-# lies by as much, for as long as the marker stays where it is in the picture; its two markers' misses taken apart,
-# the cone's offset from that camera is off by √2 that across its line of sight, which no number of its frames
-# averages away
+LENS_SHARE = float(np.sqrt(2.0))  # (no unit) × a calibration's stated RMS reprojection error × depth / f: how far a
+# camera's own offset at a cone is off an axis across its line of sight, for as long as its markers stay in that part
+# of the picture (no number of its frames averages it away). Each marker's image is taken as missed by model_px an
+# axis (the RMS read as each axis's σ, as the corners' noise reads it: measurements._corner_covariance), its two
+# markers' misses apart: √2. OpenCV's RMS is the 2-D miss's length, so that reading is √2 conservative; read per axis
+# (model_px / √2, LENS_SHARE 1), caliscope's post_monocal kept 9.7 % of its Δy errors beyond 3σ in its first seconds
 DISAGREEMENT_P = 0.95  # the cameras' means must scatter beyond what their noise gives at this probability (χ² over
 # cameras - 1 degrees of freedom) before their spread counts: unbiased cameras must not widen σ by chance
 
@@ -125,6 +127,10 @@ class Disagreement:
     by_cone: dict[int, dict[str, float]] = field(default_factory=dict)  # cone index -> camera -> its last view
     versions: dict[int, int] = field(default_factory=dict)  # cone index -> residuals kept so far
     _cache: dict[int, tuple] = field(default_factory=dict)  # cone index -> ((cameras, version), its floor (3,))
+    points: np.ndarray = field(init=False)  # (C, 3) the cones' points in the jacket frame (H's [:, 3:6] = -[r]×)
+
+    def __post_init__(self) -> None:
+        self.points = -np.stack([self.H[:, 2, 4], self.H[:, 0, 5], self.H[:, 1, 3]], axis=1)
 
     def residuals(self, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None) -> Residuals:
         """A camera frame's own offset at each cone whose pair it shows, against the state x's (n,) with covariance P
@@ -152,11 +158,11 @@ class Disagreement:
         H = self.H[seen]  # (S, 3, 12)
         fits = np.einsum("sij,jk,sik->s", H[:, :, :6], cov, H[:, :, :6])  # traces: the fits' σ² at each cone
         filtered = np.einsum("sij,jk,sik->s", H, P[:STATE, :STATE], H)  # and the filter's own
-        lens = np.diag(_lens_at(o))  # (3,) the same at every cone the frame shows (a pair's markers are near)
+        lens = _lens_at(o, self.points[seen])  # (S, 3)
         residuals = H @ (own - x[:STATE])
-        return [(k, residuals[i], 1.0 / v, lens) for i, (k, v) in enumerate(zip(seen, fits + filtered, strict=True))
-                if np.isfinite(v) and v > 1e-18 and np.isfinite(residuals[i]).all()
-                and np.isfinite(lens).all()]  # a NaN would stay for good
+        return [(k, residuals[i], 1.0 / v, lens[i]) for i, (k, v) in enumerate(zip(seen, fits + filtered,
+                                                                                    strict=True))
+                if np.isfinite(v) and v > 1e-18 and np.isfinite(residuals[i]).all()]  # a NaN would stay for good
 
     def record(self, r: Residuals) -> None:
         """Keep a frame's residuals: the filter used its topside corners (a view it refused makes no estimate)."""
@@ -179,10 +185,11 @@ class Disagreement:
         for k, cameras in self.by_cone.items():
             recent = [c for c, t in cameras.items() if time - t <= DISAGREEMENT_WINDOW_S]
             cone = self.names[k]
-            ms = {c: self.moments.get((c, cone)) for c in recent}
-            out[k] = _lens([m for m in ms.values() if m is not None and m.w > 0.0])
+            out[k] = _lens([m for c in cameras if (m := self.moments.get((c, cone))) is not None and m.w > 0.0],
+                           time)  # every camera that made the estimate, not only recent ones: its error stays
             if len(recent) < 2:
                 continue
+            ms = {c: self.moments.get((c, cone)) for c in recent}
             pending[k] = any((m is None or not m.known) and time - self.first_seen[(c, cone)] <= DISAGREEMENT_WAIT_S
                              for c, m in ms.items())  # a camera new to the cone whose noise is not known yet
             compared = {c: m for c, m in ms.items() if m is not None and m.count >= DISAGREEMENT_MIN_FRAMES}
@@ -193,10 +200,12 @@ class Disagreement:
         return out, pending
 
 
-def lens_sigmas(d: Disagreement, cone: str) -> dict[str, np.ndarray]:
-    """Per camera that has shown a cone's pair, the σ (3,) its calibration's stated error alone gives the cone's offset
-    there, m (_lens_at, as its frames weighed it)."""
-    return {c: np.sqrt(m.lens) for (c, k), m in d.moments.items() if k == cone and m.w > 0.0}
+def lens_sigmas(d: Disagreement, cone: str, time: float) -> dict[str, np.ndarray]:
+    """Per camera that has shown a cone's pair, the σ (3,) its calibration's stated error gives the cone's estimate at
+    a time, m: its own (_lens_at, as its frames weighed it) in its share of the estimate (_lens)."""
+    ms = {c: m for (c, name), m in d.moments.items() if name == cone and m.w > 0.0}
+    shares = _shares(list(ms.values()), time)
+    return {c: share * np.sqrt(m.lens) for (c, m), share in zip(ms.items(), shares, strict=True)}
 
 
 def relative_pose_jacobian(T_camera_jacket: np.ndarray, T_camera_topside: np.ndarray) -> np.ndarray:
@@ -220,28 +229,34 @@ def _turn(rvec: np.ndarray) -> np.ndarray:
     return np.stack([turns[:, 2, 1], turns[:, 0, 2], turns[:, 1, 0]])  # rows: φ's axes; columns: δrvec's
 
 
-def _lens_at(o: BodyObservation) -> np.ndarray:
-    """(3, 3) covariance, jacket frame, m², of a frame's T_jacket_topside offset that its camera's calibration error
-    gives: LENS_SHARE × model_px on each of its two bodies' images, apart, across the line of sight to the topside at
-    its depth (s² (I - l lᵀ), s = √2 LENS_SHARE model_px Z / f); nothing where the calibration states no error."""
-    assert o.jacket is not None and o.topside is not None
-    t = o.topside.T_camera_body[:3, 3]
-    depth = float(np.linalg.norm(t))
-    if not o.model_px > 0.0 or not depth > 0.0:
-        return np.zeros((3, 3))
-    sight = o.jacket.T_camera_body[:3, :3].T @ (t / depth)  # the line of sight in the jacket frame
-    s = np.sqrt(2.0) * LENS_SHARE * o.model_px * float(t[2]) / float(o.K[0, 0])
-    return s * s * (np.eye(3) - np.outer(sight, sight))
+def _lens_at(o: BodyObservation, points: np.ndarray) -> np.ndarray:
+    """(S, 3) variance per axis, jacket frame, m², of a frame's own offsets at cones at points (S, 3) (jacket frame)
+    that its camera's calibration error gives: across the line of sight to each, at its depth Z,
+    s² (I - l lᵀ) with s = LENS_SHARE × model_px × Z / f; nothing where the calibration states no error."""
+    assert o.jacket is not None
+    f = float(o.K[0, 0])
+    if not (o.model_px > 0.0 and np.isfinite(o.model_px) and f > 0.0):
+        return np.zeros((len(points), 3))
+    T = o.jacket.T_camera_body  # T_camera_jacket
+    p = points @ T[:3, :3].T + T[:3, 3]  # (S, 3) the cones in the camera
+    depth = p[:, 2]
+    sight = p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-9) @ T[:3, :3]  # (S, 3) in the jacket frame
+    s2 = (LENS_SHARE * o.model_px * np.maximum(depth, 0.0) / f) ** 2
+    return s2[:, None] * (1.0 - sight**2)  # the diagonal of s² (I - l lᵀ)
 
 
-def _lens(ms: list[_Moments]) -> np.ndarray:
-    """(3,) variance of the estimate's error its cameras' calibrations give, m²: each camera's, in its share of the
-    estimate (its residuals' weight), squared; a camera alone gives all of its own."""
+def _shares(ms: list[_Moments], time: float) -> np.ndarray:
+    """(M,) each camera's share of a cone's estimate at a time: its residuals' weight, aged to then."""
+    w = np.array([m.w * np.exp(-max(0.0, time - m.time) / DISAGREEMENT_TAU_S) for m in ms])
+    return w / w.sum() if w.sum() > 0.0 else np.zeros(len(ms))
+
+
+def _lens(ms: list[_Moments], time: float) -> np.ndarray:
+    """(3,) variance of a cone's estimate's error its cameras' calibrations give at a time, m²: each camera's in its
+    share of the estimate (_shares), squared; a camera alone gives all of its own."""
     if not ms:
         return np.zeros(3)
-    w = np.array([m.w for m in ms])
-    shares = w / w.sum()
-    return (shares**2) @ np.array([m.lens for m in ms])
+    return (_shares(ms, time) ** 2) @ np.array([m.lens for m in ms])
 
 
 def _compared(ms: list[_Moments]) -> np.ndarray:
