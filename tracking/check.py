@@ -41,7 +41,7 @@ from typing import Literal
 
 import numpy as np
 
-from tracking.camera import CameraModel
+from tracking.camera import RMS_KEY, CameraModel
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.disagreements import (
     Disagreement,
@@ -470,6 +470,14 @@ def lens_reason(lens: dict[str, np.ndarray], model_px: dict[str, float], worst: 
             "averages it away): a better calibration, a longer lens or a second camera would lower it")
 
 
+def unstated_errors(rig: Rig, runs: dict[str, CameraRun]) -> list[str]:
+    """One line per camera whose calibration states no RMS reprojection error: its lens model's own error is then in
+    no cone's σ (tracking.estimator.disagreement, the lens floor)."""
+    return [f"{rig.resolve(c.calibration)}: {RMS_KEY}: not stated, so {c.name}'s lens model error is in no σ (a "
+            "calibration by `topside calibrate` states it; without it a cone that camera alone measures may show a σ "
+            "too small)" for c in rig.cameras if c.name in runs and runs[c.name].tracker.camera.rms is None]
+
+
 def misread_markers(kf: TopsideFilter) -> list[str]:
     """One line per view the filter found misread beyond its corners' prior (measurements.misread)."""
     return [misread_warning(camera, marker, v.misread_px) for (camera, marker), v in sorted(kf.views.items())
@@ -527,7 +535,7 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
     omega = kf.x[3:6] if kf.x is not None and kf.topside_placed else np.zeros(3)
     readings = [r for name, run in runs.items() for r in cone_readings(rig, name, run.results, points, omega)]
     disagreements += cross_camera_disagreements(rig, readings)
-    warnings = [w for run in runs.values() for w in run.warnings] + misread_markers(kf)
+    warnings = [w for run in runs.values() for w in run.warnings] + misread_markers(kf) + unstated_errors(rig, runs)
     if not kf.scale.fixed:
         warnings.append(f"{rig.path}: marker_size: {kf.scale.message()}")
     below = {e.cone: float((point_offset_matrix(cone_points(rig)[e.cone]) @ kf.x[:STATE])[2]) for e in estimates

@@ -457,3 +457,19 @@ def test_a_poor_calibration_is_named_as_the_reason(clip: Path, runs: dict[str, C
     poor = check_runs(rig, again, SECONDS)
     assert any(f"calibration states {rms_px:.2f} px RMS error" in c.reason for c in poor.cones)
     assert not any("calibration states" in c.reason for c in check_runs(rig, runs, SECONDS).cones)
+
+
+def test_a_calibration_that_states_no_error_is_named(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:
+    """The simulator's calibrations state theirs (exact: 0 px), so check names none; a calibration without one (a
+    camera maker's, say) is named with the file and the field: its lens model's error is in no σ."""
+    rig = load_rig(rig_file(clip, tmp_path))
+    assert not any("avg_reprojection_error" in w for w in check_runs(rig, runs, SECONDS).warnings)
+    name = rig.cameras[0].name
+    run = runs[name]
+    tracker = CameraTracker(rig, rig.cameras[0], dataclasses.replace(run.tracker.camera, rms=None),
+                            run.tracker.detector)
+    unstated = {**runs, name: dataclasses.replace(run, tracker=tracker)}
+    named = [w for w in check_runs(rig, unstated, SECONDS).warnings if "avg_reprojection_error" in w]
+    assert named == [f"{rig.resolve(rig.cameras[0].calibration)}: avg_reprojection_error: not stated, so {name}'s lens "
+                     "model error is in no σ (a calibration by `topside calibrate` states it; without it a cone that "
+                     "camera alone measures may show a σ too small)"]

@@ -68,9 +68,9 @@ def effective_duration(scenario: Scenario, duration: float | None) -> float:
 
 
 def camera_model(cam: CameraSpec) -> CameraModel:
-    """The true camera model of a camera spec."""
+    """The true camera model of a camera spec: exact, so its stated RMS reprojection error is 0."""
     K = np.array([[cam.K[0], 0, cam.K[2]], [0, cam.K[1], cam.K[3]], [0, 0, 1.0]])
-    return CameraModel(K=K, dist=np.array(cam.dist, float), width=cam.width, height=cam.height)
+    return CameraModel(K=K, dist=np.array(cam.dist, float), width=cam.width, height=cam.height, rms=0.0)
 
 
 def _progress() -> Progress:
