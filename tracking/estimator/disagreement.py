@@ -21,6 +21,12 @@ mean_c(var_c / n_c), where it is significant (var_c(mean_c) beyond the noise ter
 variance is at least that. Cameras that agree, or a cone one camera sees, add nothing. A cone that a camera new to
 it sees is not shown until that camera is compared, for DISAGREEMENT_WAIT_S at most (the first frames of two webcams
 put the board's halves 5-10σ apart before anything said they disagree; a third joining later pulled them 5σ off).
+
+A camera alone, or cameras not yet compared, show no disagreement, yet each carries its calibration's error. Where
+the calibration states it (model_px, its RMS reprojection error), each frame's offsets also carry the variance that
+error gives them across the camera's line of sight to each cone (_lens_at), weighted as the residuals are; a cone's
+reported variance is at least Σ share² of its cameras' (their residuals' weights aged to now), or the disagreement's
+where that is more.
 """
 
 from __future__ import annotations
