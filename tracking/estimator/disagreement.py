@@ -134,6 +134,7 @@ class Disagreement:
     versions: dict[int, int] = field(default_factory=dict)  # cone index -> residuals kept so far
     _cache: dict[int, tuple] = field(default_factory=dict)  # cone index -> ((cameras, version), its floor (3,))
     points: np.ndarray = field(init=False)  # (C, 3) the cones' points in the jacket frame (H's [:, 3:6] = -[r]×)
+    stated: bool = False  # a camera's calibration stated an error: until then no cone has a lens floor to take
 
     def __post_init__(self) -> None:
         self.points = -np.stack([self.H[:, 2, 4], self.H[:, 0, 5], self.H[:, 1, 3]], axis=1)
@@ -165,6 +166,7 @@ class Disagreement:
         fits = np.einsum("sij,jk,sik->s", H[:, :, :6], cov, H[:, :, :6])  # traces: the fits' σ² at each cone
         filtered = np.einsum("sij,jk,sik->s", H, P[:STATE, :STATE], H)  # and the filter's own
         lens = _lens_at(o, self.points[seen])  # (S, 3)
+        self.stated = self.stated or o.model_px > 0.0
         residuals = H @ (own - x[:STATE])
         return [(k, residuals[i], 1.0 / v, lens[i]) for i, (k, v) in enumerate(zip(seen, fits + filtered,
                                                                                     strict=True))
@@ -191,8 +193,9 @@ class Disagreement:
         for k, cameras in self.by_cone.items():
             recent = [c for c, t in cameras.items() if time - t <= DISAGREEMENT_WINDOW_S]
             cone = self.names[k]
-            out[k] = _lens([m for c in cameras if (m := self.moments.get((c, cone))) is not None and m.w > 0.0],
-                           time)  # every camera that made the estimate, not only recent ones: its error stays
+            if self.stated:  # every camera that made the estimate, not only recent ones: its error stays
+                out[k] = _lens([m for c in cameras if (m := self.moments.get((c, cone))) is not None and m.w > 0.0],
+                               time)
             if len(recent) < 2:
                 continue
             ms = {c: self.moments.get((c, cone)) for c in recent}
