@@ -246,6 +246,21 @@ class Served:
         return at
 
 
+def stop(proc: subprocess.Popen, timeout: float = 60.0) -> str:
+    """SIGTERM a topside command started with pipes, then SIGKILL if it has not ended within timeout s (after
+    SIGUSR1, on which topside prints every thread's stack): the tail of what it printed, to name where it hung."""
+    proc.send_signal(signal.SIGTERM)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(2.0)
+        proc.kill()
+        out, err = proc.communicate()
+        err = f"(killed {timeout:.0f} s after SIGTERM)\n{err}"
+    return f"{(out or '')[-2000:]}{(err or '')[-6000:]}"
+
+
 @contextmanager
 def serving(cmd: list[str], marker: str, timeout: float = 120.0) -> Iterator[Served]:
     """A topside command printing a URL after `marker` within timeout s; its output (stdout and stderr) read and
@@ -273,7 +288,9 @@ def serving(cmd: list[str], marker: str, timeout: float = 120.0) -> Iterator[Ser
         proc.send_signal(signal.SIGTERM)
         try:
             proc.wait(timeout=60)
-        except subprocess.TimeoutExpired:
+        except subprocess.TimeoutExpired:  # where it hangs, in its output: topside dumps its stacks on SIGUSR1
+            proc.send_signal(signal.SIGUSR1)
+            time.sleep(2.0)
             proc.kill()
             proc.wait()
         reader.join(timeout=10)

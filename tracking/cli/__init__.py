@@ -18,6 +18,7 @@ lint-imports). Its commands live by group:
 
 from __future__ import annotations
 
+import faulthandler
 import signal
 import sys
 from typing import Annotated
@@ -91,6 +92,8 @@ def main() -> None:
         app()
         return
     signal.signal(signal.SIGTERM, _interrupt)
+    if hasattr(signal, "SIGUSR1"):  # `kill -USR1 <pid>`: every thread's stack on stderr, the command runs on
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     sys.argv[1:] = _ray_address_optional(sys.argv[1:])
     try:
         code = app(standalone_mode=False)
