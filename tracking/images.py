@@ -345,11 +345,28 @@ def luma(frame: av.VideoFrame) -> np.ndarray:
     return np.ascontiguousarray(rows[:frame.height, :frame.width])
 
 
+def quarter_turns(frame: av.VideoFrame) -> int:
+    """Quarter turns counterclockwise (0-3) that present the frame upright: its container's display rotation (a
+    phone filming in portrait stores landscape pixels and this), as players and OpenCV show it; 0 for an angle that
+    is not a quarter turn."""
+    turns, rest = divmod(frame.rotation, 90)
+    return int(turns) % 4 if rest == 0 else 0
+
+
+def upright(image: np.ndarray, turns: int) -> np.ndarray:
+    """The image (H, W[, 3]) turned counterclockwise by turns quarter turns (np.rot90), contiguous."""
+    return image if turns == 0 else np.ascontiguousarray(np.rot90(image, turns))
+
+
 def _frame(frame: av.VideoFrame, index: int, time: float, keep_color: bool, packet: tuple[bytes, bool] | None,
            video: VideoHealth) -> Frame:
-    """One decoded frame as a Frame, at its capture time."""
-    return Frame(index=index, time=time, gray=luma(frame),
-                 bgr=frame.to_ndarray(format="bgr24") if keep_color else None,
+    """One decoded frame as a Frame, at its capture time, upright as players show it (a calibration made from the
+    same camera's photos or frames is too). A turned frame keeps no packet: the recording's video decoder would show
+    its pixels unturned, so it is recorded as an image."""
+    turns = quarter_turns(frame)
+    packet = packet if turns == 0 else None
+    return Frame(index=index, time=time, gray=upright(luma(frame), turns),
+                 bgr=upright(frame.to_ndarray(format="bgr24"), turns) if keep_color else None,
                  packet=packet[0] if packet else None, keyframe=packet[1] if packet else False, video=video)
 
 
