@@ -4,6 +4,10 @@ The file layout is the one OpenCV's calibration sample writes (`camera_matrix`,
 `distortion_coefficients`, `image_width`, `image_height`, `avg_reprojection_error`), so files
 from OpenCV, from `topside calibrate` and from the simulator are interchangeable.
 
+ROS's camera_info YAML (camera_calibration's `ost.yaml`: the same keys, each matrix as rows, cols and data without
+OpenCV's tag, and a `distortion_model`) is read too; a distortion model other than the pinhole's (plumb_bob,
+rational_polynomial) is refused, since the tracker does not model it.
+
 A file without `image_width` and `image_height` (OpenCV's tutorial files ship so) is read too: its model has no size
 until the first frame of its camera gives one (CameraModel.sized_from), with one warning line naming the file and the
 size taken; a later frame of another size is still an error. Undistortion and poses use only K and the distortion.
@@ -25,6 +29,8 @@ DISTORTION_SIZES = (4, 5, 8, 12, 14)
 MAX_IMAGE_SIDE_PX = 100_000  # beyond any sensor: a bigger image_width is a typo
 MAX_FOCAL_PX = 1e7  # beyond any lens on any sensor; keeps every projection finite
 RMS_KEY = "avg_reprojection_error"
+PINHOLE_MODELS = ("plumb_bob", "rational_polynomial")  # ROS camera_info's names for the models OpenCV's coefficients
+# hold (5 and 8 of them); "equidistant" (fisheye) and others are not modelled
 # what OpenCV's reader raises: its cv2.error, the SystemError its binding wraps that in, and UnicodeDecodeError for a
 # string it unescaped into invalid UTF-8 ("\\é" drops the é's first byte)
 OPENCV_READ_ERRORS = (cv2.error, SystemError, UnicodeDecodeError)
@@ -144,23 +150,51 @@ def _read_matrix(fs: cv2.FileStorage, path: Path, key: str, max_elements: int) -
     rows, cols = (int(n.real()) for n in sizes)
     if rows <= 0 or cols <= 0 or rows * cols > max_elements:
         raise InputError(path, f"is {rows}x{cols} ({expected})", key)
-    try:
-        mat = node.mat()
-    except OPENCV_READ_ERRORS as exc:
-        raise InputError(path, f"not a readable matrix ({opencv_reason(exc)}); {expected}", key) from None
-    if mat is None:
-        raise InputError(path, f"not a matrix ({expected})", key)
-    values = np.asarray(mat, dtype=np.float64)
+    if not present(node.getNode("dt")):  # ROS camera_info: rows, cols and data, no element type
+        values = _untyped_matrix(node.getNode("data"), rows, cols, path, key)
+    else:
+        try:
+            mat = node.mat()
+        except OPENCV_READ_ERRORS as exc:
+            raise InputError(path, f"not a readable matrix ({opencv_reason(exc)}); {expected}", key) from None
+        if mat is None:
+            raise InputError(path, f"not a matrix ({expected})", key)
+        values = np.asarray(mat, dtype=np.float64)
     if not np.isfinite(values).all():
         raise InputError(path, "holds NaN or infinity (expected finite numbers)", key)
     return values
 
 
+def _untyped_matrix(data: cv2.FileNode, rows: int, cols: int, path: Path, key: str) -> np.ndarray:
+    """(rows, cols) float64 from a sequence of rows x cols numbers (a matrix without OpenCV's dt, as ROS writes it)."""
+    items = [data.at(i) for i in range(data.size())]
+    if len(items) != rows * cols:
+        raise InputError(path, f"data: expected {rows * cols} numbers ({rows}x{cols}), got {len(items)} items", key)
+    bad = next((i for i, n in enumerate(items) if not (n.isInt() or n.isReal())), None)
+    if bad is not None:
+        raise InputError(path, f"data: item {bad + 1} is not a number (expected {rows * cols} numbers)", key)
+    return np.array([n.real() for n in items], dtype=np.float64).reshape(rows, cols)
+
+
+def _check_distortion_model(fs: cv2.FileStorage, path: Path) -> None:
+    """ROS camera_info's distortion_model, where given: one whose coefficients OpenCV's pinhole model holds."""
+    node = fs.getNode("distortion_model")
+    if not present(node):
+        return
+    model = node.string() if node.isString() else ""
+    if model not in PINHOLE_MODELS:
+        raise InputError(path, f"{model or 'not a name'}: the tracker models a pinhole lens with OpenCV's "
+                               f"coefficients (expected {' or '.join(PINHOLE_MODELS)}; calibrate a fisheye lens "
+                               "with them, or undistort its video first)", "distortion_model")
+
+
 def load_camera(path: str | Path) -> CameraModel:
-    """Read a camera model from an OpenCV FileStorage YAML file; a one-line InputError for anything else."""
+    """Read a camera model from an OpenCV FileStorage YAML file (or ROS camera_info YAML); a one-line InputError
+    for anything else."""
     path = Path(path)
     fs = open_storage(path, "calibration file")
     try:
+        _check_distortion_model(fs, path)
         K = _read_matrix(fs, path, "camera_matrix", 9)
         if K is None:
             raise InputError(path, "missing (expected an OpenCV matrix)", "camera_matrix")

@@ -1,3 +1,4 @@
+import re
 from pathlib import Path
 
 import numpy as np
@@ -213,3 +214,51 @@ def test_track_and_detect_warn_once_for_a_calibration_without_a_size(installatio
     assert detect.returncode == 0, detect.stderr
     assert detect.stderr.count("image_width/image_height: not given; took 920x600 from the first frame of") == 1
     assert '"pose"' in detect.stdout
+
+
+ROS_CAMERA_INFO = """image_width: 920
+image_height: 600
+camera_name: stern1
+camera_matrix:
+  rows: 3
+  cols: 3
+  data: [1000.5, 0, 460.2, 0, 1001.1, 300.7, 0, 0, 1]
+distortion_model: {model}
+distortion_coefficients:
+  rows: 1
+  cols: {n}
+  data: [{coefficients}]
+rectification_matrix:
+  rows: 3
+  cols: 3
+  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]
+projection_matrix:
+  rows: 3
+  cols: 4
+  data: [1000.5, 0, 460.2, 0, 0, 1001.1, 300.7, 0, 0, 0, 1, 0]
+"""
+
+
+@pytest.mark.parametrize("model, coefficients", [("plumb_bob", [-0.1, 0.05, 0.001, -0.002, 0.0]),
+                                                 ("rational_polynomial", [-0.1, 0.05, 0.001, -0.002, 0, 0.01, 0, 0])])
+def test_reads_ros_camera_info(tmp_path: Path, model: str, coefficients: list[float]) -> None:
+    """ROS's camera_calibration writes its matrices without OpenCV's tag (rows, cols, data) and names the model."""
+    path = tmp_path / "ost.yaml"
+    path.write_text(ROS_CAMERA_INFO.format(model=model, n=len(coefficients),
+                                           coefficients=", ".join(map(str, coefficients))))
+    cam = load_camera(path)
+    np.testing.assert_array_equal(cam.K, [[1000.5, 0, 460.2], [0, 1001.1, 300.7], [0, 0, 1]])
+    np.testing.assert_array_equal(cam.dist, coefficients)
+    assert cam.image_size == (920, 600) and cam.rms is None  # ROS states no error: `check` says so
+
+
+@pytest.mark.parametrize("model, data, message", [
+    ("equidistant", "-0.1, 0.05, 0.001, -0.002", "distortion_model: equidistant: the tracker models a pinhole lens"),
+    ("plumb_bob", "-0.1, 0.05, 0.001, -0.002", "distortion_coefficients: data: expected 5 numbers (1x5), got 4"),
+    ("plumb_bob", "-0.1, 0.05, 0.001, -0.002, k3", "distortion_coefficients: data: item 5 is not a number")])
+def test_a_ros_camera_info_the_tracker_cannot_use_is_named(tmp_path: Path, model: str, data: str,
+                                                          message: str) -> None:
+    path = tmp_path / "ost.yaml"
+    path.write_text(ROS_CAMERA_INFO.format(model=model, n=5, coefficients=data))
+    with pytest.raises(InputError, match=re.escape(message)):
+        load_camera(path)
