@@ -183,7 +183,8 @@ def render_installation(folder, motion, times: dict[str, np.ndarray], dist: np.n
     for name, eye in CAMERA_EYES.items():
         T_jacket_cam = look_at(eye, CONE_A + np.array([0.0, 0.0, JACKET_MARKER_Z + MATED_RISE / 2]))
         poses.append((name, T_to_pose(T_jacket_cam)))
-        save_camera(folder / f"calibration/{name}.yaml", CameraModel(PAPER_K, dist, *PAPER_SIZE))
+        exact = CameraModel(PAPER_K, dist, *PAPER_SIZE, rms=0.0)  # the renderer's own camera: states 0 px
+        save_camera(folder / f"calibration/{name}.yaml", exact)
         cams.append({"name": name, "calibration": f"calibration/{name}.yaml", "source": f"{name}.mp4",
                      "time_offset": float(times[name][0]), "mount": "drone"})  # the filter's loosest prior
         with av.open(str(folder / f"{name}.mp4"), "w") as out:

@@ -29,6 +29,9 @@ DISTORTION_SIZES = (4, 5, 8, 12, 14)
 MAX_IMAGE_SIDE_PX = 100_000  # beyond any sensor: a bigger image_width is a typo
 MAX_FOCAL_PX = 1e7  # beyond any lens on any sensor; keeps every projection finite
 RMS_KEY = "avg_reprojection_error"
+UNSTATED_RMS_PX = 0.5  # the lens model error taken for a calibration that states none: the top of what a sound
+# calibration leaves (0.1-0.5 px); the real webcams' calibrations state 0.33-0.54 px, and without it their σ held
+# 51-79 % of the errors within 2σ on some axis (docs/accuracy.md#real-footage)
 PINHOLE_MODELS = ("plumb_bob", "rational_polynomial")  # ROS camera_info's names for the models OpenCV's coefficients
 # hold (5 and 8 of them); "equidistant" (fisheye) and others are not modelled
 # what OpenCV's reader raises: its cv2.error, the SystemError its binding wraps that in, and UnicodeDecodeError for a
@@ -51,6 +54,11 @@ class CameraModel:
     height: int | None
     rms: float | None = None  # average reprojection error of the calibration, px
     extra: dict[str, float] = field(default_factory=dict)  # other scalars kept from the file
+
+    @property
+    def model_px(self) -> float:
+        """The lens model's RMS error the tracker takes, px: the stated rms, else UNSTATED_RMS_PX."""
+        return self.rms if self.rms is not None else UNSTATED_RMS_PX
 
     @property
     def sized(self) -> bool:

@@ -41,7 +41,7 @@ from typing import Literal
 
 import numpy as np
 
-from tracking.camera import RMS_KEY, CameraModel
+from tracking.camera import RMS_KEY, UNSTATED_RMS_PX, CameraModel
 from tracking.detection import DEFAULT_REFINEMENT, Refinement
 from tracking.disagreements import (
     Disagreement,
@@ -456,26 +456,30 @@ def depth_reason(e: ConeEstimate, cameras: tuple[str, ...], rig: Rig, cone: str)
 LENS_NOTE_SHARE = 0.5  # a camera's calibration is named when what its stated error alone leaves is this much of σ
 
 
-def lens_reason(lens: dict[str, np.ndarray], model_px: dict[str, float], worst: float) -> str:
-    """'; CAM's calibration states ... px ...' when the σ one camera's stated calibration error alone gives a cone's
-    estimate (lens: camera -> (3,) m, in its share, tracking.estimator.disagreement.lens_sigmas) is LENS_NOTE_SHARE
-    of its worst σ or more, else ''."""
+def lens_reason(lens: dict[str, np.ndarray], model_px: dict[str, float], worst: float,
+                unstated: frozenset[str] = frozenset()) -> str:
+    """'; CAM's calibration states ... px ...' when the σ one camera's calibration error (model_px: camera -> px, as
+    the floor takes it; unstated: the cameras whose calibration states none, taken as camera.UNSTATED_RMS_PX) alone
+    gives a cone's estimate (lens: camera -> (3,) m, in its share, tracking.estimator.disagreement.lens_sigmas) is
+    LENS_NOTE_SHARE of its worst σ or more, else ''."""
     if not lens:
         return ""
     camera, sigma = max(lens.items(), key=lambda item: float(item[1].max()))
     if not float(sigma.max()) >= LENS_NOTE_SHARE * worst:
         return ""
-    return (f"; {camera}'s calibration states {model_px.get(camera, 0.0):.2f} px RMS error, which alone leaves "
+    states = "states no error, taken as" if camera in unstated else "states"
+    return (f"; {camera}'s calibration {states} {model_px.get(camera, 0.0):.2f} px RMS error, which alone leaves "
             f"σ {float(sigma.max()) * 1000:.0f} mm in the estimate, across its line of sight (no number of frames "
             "averages it away): a better calibration, a longer lens or a second camera would lower it")
 
 
 def unstated_errors(rig: Rig, runs: dict[str, CameraRun]) -> list[str]:
-    """One line per camera whose calibration states no RMS reprojection error: its lens model's own error is then in
-    no cone's σ (tracking.estimator.disagreement, the lens floor)."""
-    return [f"{rig.resolve(c.calibration)}: {RMS_KEY}: not stated, so {c.name}'s lens model error is in no σ (a "
-            "calibration by `topside calibrate` states it; without it a cone that camera alone measures may show a σ "
-            "too small)" for c in rig.cameras if c.name in runs and runs[c.name].tracker.camera.rms is None]
+    """One line per camera whose calibration states no RMS reprojection error: its lens model's own error is then
+    taken as UNSTATED_RMS_PX (camera.CameraModel.model_px): in its corners' noise and the σ floor."""
+    return [f"{rig.resolve(c.calibration)}: {RMS_KEY}: not stated, so {c.name}'s lens model error is taken as "
+            f"{UNSTATED_RMS_PX:g} px, the top of what a sound calibration leaves (a calibration by `topside calibrate` "
+            "states its own; a better one lowers every σ that camera's view gives)"
+            for c in rig.cameras if c.name in runs and runs[c.name].tracker.camera.rms is None]
 
 
 def misread_markers(kf: TopsideFilter) -> list[str]:
@@ -542,7 +546,8 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
              if e.withheld == WITHHELD_BELOW}  # the offset the filter withheld, at the end
     topside = topside_pose(kf.x) if kf.topside_placed else None
     model_px = {name: cam.model_px for name, cam in kf.cameras.items()}
+    unstated = frozenset(name for name, run in runs.items() if run.tracker.camera.rms is None)
     checks = cone_checks(rig, estimates, sights,
                          lambda cone, worst: lens_reason(lens_sigmas(kf.disagreement, cone, kf.time or 0.0),
-                                                         model_px, worst))
+                                                         model_px, worst, unstated))
     return CheckReport(rig, seconds, cameras, disagreements, checks, warnings, topside, kf.scale, below)

@@ -157,8 +157,8 @@ class BodyObservation:
     corners: dict[int, np.ndarray] = field(default_factory=dict)  # id -> (4, 2) undistorted (ideal) pixels
     K: np.ndarray = field(default_factory=lambda: np.eye(3))  # (3, 3) camera matrix of the ideal pixels
     scale: tuple[ScaleSample, ...] = ()  # the markers' size against the rig's, from two markers of one body
-    model_px: float = 0.0  # RMS reprojection error of the camera's calibration, px (0: not stated): how well its model
-    # maps a point, which no corner of it can beat
+    model_px: float = 0.0  # RMS reprojection error of the camera's calibration, px (CameraModel.model_px: assumed where
+    # it states none): how well its model maps a point, which no corner of it can beat
 
     @property
     def choice(self) -> Choice:
@@ -180,7 +180,7 @@ def observe_bodies(geometry: BodyGeometry, poses: dict[int, MarkerPose], camera:
     corners = {i: camera.undistort_points(p.corners) for i, p in poses.items()
                if i in geometry.jacket or i in geometry.topside}
     return BodyObservation(time, name, bodies[0], bodies[1], corners, camera.K,
-                           separations(geometry, poses, name, marker_size), camera.rms or 0.0)
+                           separations(geometry, poses, name, marker_size), camera.model_px)
 
 
 def separations(geometry: BodyGeometry, poses: dict[int, MarkerPose], name: str, marker_size: float

@@ -262,3 +262,12 @@ def test_a_ros_camera_info_the_tracker_cannot_use_is_named(tmp_path: Path, model
     path.write_text(ROS_CAMERA_INFO.format(model=model, n=5, coefficients=data))
     with pytest.raises(InputError, match=re.escape(message)):
         load_camera(path)
+
+
+def test_a_calibration_that_states_no_error_is_taken_at_the_top_of_a_sound_ones() -> None:
+    from tracking.camera import UNSTATED_RMS_PX
+
+    K = np.array([[1000.0, 0, 460], [0, 1000, 300], [0, 0, 1]])
+    assert CameraModel(K, np.zeros(5), 920, 600).model_px == UNSTATED_RMS_PX == 0.5
+    assert CameraModel(K, np.zeros(5), 920, 600, rms=0.0).model_px == 0.0  # stated: exact (the simulator's)
+    assert CameraModel(K, np.zeros(5), 920, 600, rms=0.31).model_px == 0.31

@@ -223,7 +223,7 @@ def observations(the_rig: Rig, seconds: float, seed: int = 0, outlier_px: float 
     from tests.synthetic import look_at
 
     rng = np.random.default_rng(seed)
-    camera = CameraModel(K, np.zeros(5), 920, 600)
+    camera = CameraModel(K, np.zeros(5), 920, 600, rms=0.0)  # exact: the corners are its own projections
     geometry = body_geometry(the_rig)
     out = []
     for k, (name, eye) in enumerate(CAMERA_EYES.items()):
@@ -572,7 +572,7 @@ def test_a_view_with_a_corner_off_does_not_place_a_camera() -> None:
     from tracking.estimator.noise import fits_its_corners
 
     the_rig = camera_rig("vessel")
-    camera = CameraModel(K, np.zeros(5), 920, 600)
+    camera = CameraModel(K, np.zeros(5), 920, 600, rms=0.0)  # exact: the corners are its own projections
     obs = observations(the_rig, 1.0)
     k, first = next((k, o) for k, o in enumerate(obs) if o.camera == "far" and o.jacket is not None)
     corners = {i: c.copy() for i, c in first.corners.items()}
@@ -606,7 +606,7 @@ def oblique_far_view(the_rig: Rig, degrees: float = 18.0, distance: float = 44.0
     a = np.radians(degrees)
     eye = centre + distance * np.array([np.sin(a), -np.cos(a), 0.0])
     T_camera_jacket = np.linalg.inv(look_at(eye, centre))
-    camera = CameraModel(K, np.zeros(5), 920, 600)
+    camera = CameraModel(K, np.zeros(5), 920, 600, rms=0.0)  # exact: the corners are its own projections
     rng = np.random.default_rng(seed)
     poses = {}
     for m, T_body in ((marker, np.eye(4)), *(((top, topside_T(t)),) if t is not None else ())):
@@ -696,7 +696,7 @@ def one_cone_observations(the_rig: Rig, seconds: float, seed: int = 0) -> list[B
     from tests.synthetic import look_at
 
     rng = np.random.default_rng(seed)
-    camera = CameraModel(K, np.zeros(5), 920, 600)
+    camera = CameraModel(K, np.zeros(5), 920, 600, rms=0.0)  # exact: the corners are its own projections
     geometry = body_geometry(the_rig)
     persistent = {(n, m.id): rng.normal(0.0, PERSISTENT_CORNER_PX, (4, 2))
                   for n in ONE_CONE_EYES for m in the_rig.markers}

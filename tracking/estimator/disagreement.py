@@ -22,8 +22,9 @@ variance is at least that. Cameras that agree, or a cone one camera sees, add no
 it sees is not shown until that camera is compared, for DISAGREEMENT_WAIT_S at most (the first frames of two webcams
 put the board's halves 5-10σ apart before anything said they disagree; a third joining later pulled them 5σ off).
 
-A camera alone, or cameras not yet compared, show no disagreement, yet each carries its calibration's error. Where
-the calibration states it (model_px, its RMS reprojection error), each frame's offsets also carry the variance that
+A camera alone, or cameras not yet compared, show no disagreement, yet each carries its calibration's error: the RMS
+reprojection error the calibration states, or an assumed one where it states none (model_px, CameraModel.model_px). Each
+frame's offsets also carry the variance that
 error gives them across the camera's line of sight to each cone (_lens_at), weighted as the residuals are; a cone's
 reported variance is at least Σ share² of its cameras' (their residuals' weights aged to now), or the disagreement's
 where that is more.
@@ -241,7 +242,7 @@ def _turn(rvec: np.ndarray) -> np.ndarray:
 def _lens_at(o: BodyObservation, points: np.ndarray) -> np.ndarray:
     """(S, 3) variance per axis, jacket frame, m², of a frame's own offsets at cones at points (S, 3) (jacket frame)
     that its camera's calibration error gives: across the line of sight to each, at its depth Z,
-    s² (I - l lᵀ) with s = LENS_SHARE × model_px × Z / f; nothing where the calibration states no error."""
+    s² (I - l lᵀ) with s = LENS_SHARE × model_px × Z / f (nothing at 0 px, an exact calibration's)."""
     assert o.jacket is not None
     f = float(o.K[0, 0])
     if not (o.model_px > 0.0 and np.isfinite(o.model_px) and f > 0.0):

@@ -11,7 +11,7 @@ says it cannot be known, or whose offset only a rig error explains, is withheld 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -156,8 +156,7 @@ class TopsideFilter(FilterState):
             if not place_camera(self, cam, o):
                 return False
         if not self.topside_placed and (o.topside is None or not place_topside(self, cam, o.topside)):
-            o = BodyObservation(o.time, o.camera, o.jacket, None,
-                                {i: c for i, c in o.corners.items() if i in self.jacket_corners}, o.K)
+            o = replace(o, topside=None, corners={i: c for i, c in o.corners.items() if i in self.jacket_corners})
         jacket = {i: z for i, z in o.corners.items() if i in self.jacket_corners}
         self._measure_motion(cam, o.time, jacket, o.K, o.jacket)
         topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
