@@ -253,18 +253,49 @@ def stop(proc: subprocess.Popen, timeout: float = 60.0) -> str:
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
-        proc.send_signal(signal.SIGUSR1)
-        time.sleep(2.0)
-        proc.kill()
-        out, err = proc.communicate()
-        err = f"(killed {timeout:.0f} s after SIGTERM)\n{err}"
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGUSR1)
+            time.sleep(2.0)
+            proc.kill()
+            note = f"(killed {timeout:.0f} s after SIGTERM)"
+        else:
+            note = "(it ended; a process it started kept its output open)"
+        try:
+            out, err = proc.communicate(timeout=10.0)
+        except subprocess.TimeoutExpired as exc:  # that process still holds the pipes: what came, and let go
+            out, err = _text(exc.stdout), _text(exc.stderr)
+            for pipe in (proc.stdout, proc.stderr):
+                if pipe is not None:
+                    pipe.close()
+        err = f"{note}\n{err or ''}"
     return f"{(out or '')[-2000:]}{(err or '')[-6000:]}"
+
+
+@contextmanager
+def stopped_after(proc: subprocess.Popen) -> Iterator[list[str]]:
+    """The block, then stop(proc); what it printed in the list yielded, and under any failure of the block."""
+    output: list[str] = []
+    try:
+        yield output
+    except Exception as exc:
+        output.append(stop(proc))
+        exc.add_note(f"the session printed:\n{output[0]}")
+        raise
+    finally:
+        if not output:
+            output.append(stop(proc))
+
+
+def _text(data: bytes | str | None) -> str:
+    """A pipe's partial output, as text."""
+    return data.decode(errors="replace") if isinstance(data, bytes) else (data or "")
 
 
 @contextmanager
 def serving(cmd: list[str], marker: str, timeout: float = 120.0) -> Iterator[Served]:
     """A topside command printing a URL after `marker` within timeout s; its output (stdout and stderr) read and
     timed on, so a full pipe never stops it; SIGTERM after, then SIGKILL if it has not ended within 60 s."""
+    stopping: list[Exception] = []
     t0 = time.monotonic()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines: list[tuple[float, str]] = []
@@ -284,6 +315,9 @@ def serving(cmd: list[str], marker: str, timeout: float = 120.0) -> Iterator[Ser
         t_url, line = next((t, line) for t, line in lines if marker in line)
         url = line.split(marker, 1)[1].strip().strip('"')
         yield Served(proc, url, t_url - t0, lines)
+    except Exception as exc:  # what the command printed, under the failure (stacks too, if it had to be killed)
+        stopping.append(exc)
+        raise
     finally:
         proc.send_signal(signal.SIGTERM)
         try:
@@ -294,6 +328,8 @@ def serving(cmd: list[str], marker: str, timeout: float = 120.0) -> Iterator[Ser
             proc.kill()
             proc.wait()
         reader.join(timeout=10)
+        for exc in stopping:
+            exc.add_note("the command printed:\n" + "".join(text for _, text in lines[-80:]))
 
 
 def ring_pixels(image: np.ndarray, columns: int) -> list[int]:

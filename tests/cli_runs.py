@@ -3,6 +3,7 @@ status and what it wrote to the file descriptors, without a new interpreter's 1-
 
 from __future__ import annotations
 
+import faulthandler
 import signal
 import subprocess
 import sys
@@ -32,6 +33,8 @@ def run_topside(args: list[str], cwd: Path | None, capfd: pytest.CaptureFixture[
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
     finally:
         signal.signal(signal.SIGTERM, sigterm)
+        if hasattr(signal, "SIGUSR1"):
+            faulthandler.unregister(signal.SIGUSR1)  # it wrote to this run's captured stderr
     out, err = capfd.readouterr()
     return code, out, err
 

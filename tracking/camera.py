@@ -154,7 +154,7 @@ def _read_matrix(fs: cv2.FileStorage, path: Path, key: str, max_elements: int) -
         raise InputError(path, f"not a matrix ({expected})", key)
     sizes = [node.getNode(part) for part in ("rows", "cols")]
     if not all(present(n) and n.isInt() for n in sizes) or not node.getNode("data").isSeq():
-        raise InputError(path, f"not a matrix: needs rows, cols, dt and data ({expected})", key)
+        raise InputError(path, f"not a matrix: needs rows, cols and data ({expected})", key)
     rows, cols = (int(n.real()) for n in sizes)
     if rows <= 0 or cols <= 0 or rows * cols > max_elements:
         raise InputError(path, f"is {rows}x{cols} ({expected})", key)

@@ -353,6 +353,17 @@ def quarter_turns(frame: av.VideoFrame) -> int:
     return int(turns) % 4 if rest == 0 else 0
 
 
+def turned(container: av.container.InputContainer) -> bool:
+    """True when the video's first frame has a display rotation (its frames are then recorded as images)."""
+    import av
+
+    try:
+        frame = next(container.decode(video=0), None)
+    except av.error.FFmpegError:
+        return False
+    return frame is not None and quarter_turns(frame) != 0
+
+
 def upright(image: np.ndarray, turns: int) -> np.ndarray:
     """The image (H, W[, 3]) turned counterclockwise by turns quarter turns (np.rot90), contiguous."""
     return image if turns == 0 else np.ascontiguousarray(np.rot90(image, turns))

@@ -30,6 +30,7 @@ from tracking.images import (
     open_video,
     passes_through,
     to_the_end,
+    turned,
 )
 from tracking.rig import CameraEntry, Rig
 
@@ -242,7 +243,7 @@ def byte_rate(rig: Rig, entry: CameraEntry) -> float:
     try:
         with open_video(path) as container:
             duration = (container.duration or 0) / av.time_base
-            if not passes_through(container.streams.video[0]):
+            if not passes_through(container.streams.video[0]) or turned(container):
                 return assumed
         return path.stat().st_size / duration if duration > 0 else assumed
     except (InputError, OSError):

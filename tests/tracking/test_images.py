@@ -58,17 +58,19 @@ def test_a_video_with_a_display_rotation_is_read_upright_as_players_show_it(inst
     import numpy as np
 
     from tracking.camera import load_camera
-    from tracking.images import frames
+    from tracking.images import frames, open_video, turned
     from tracking.rig import load_rig
 
-    turned = tmp_path / f"turned{degrees}.mp4"
-    upright = _turned_copy(installation / "cam-port.mp4", turned, degrees, 6)
-    read = list(frames(turned, keep_color=True, packets=True))
+    turned_path = tmp_path / f"turned{degrees}.mp4"
+    upright = _turned_copy(installation / "cam-port.mp4", turned_path, degrees, 6)
+    read = list(frames(turned_path, keep_color=True, packets=True))
     assert len(read) == len(upright)
     for got, want in zip(read, upright, strict=True):
         assert got.gray.shape == want.shape and np.array_equal(got.gray, want)
         assert got.bgr.shape[:2] == want.shape
         assert got.packet is None  # recorded as an image: the recording's video decoder would show it unturned
+    with open_video(turned_path) as turned_video, open_video(installation / "cam-port.mp4") as plain:
+        assert turned(turned_video) and not turned(plain)  # the live server's budget takes it for pictures
     rig = load_rig(installation / "rig.yaml")
     entry = next(c for c in rig.cameras if c.name == "cam-port")
     camera = load_camera(rig.resolve(entry.calibration))

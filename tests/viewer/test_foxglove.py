@@ -17,7 +17,7 @@ import websockets
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
-from tests.browser import stop
+from tests.browser import stopped_after
 from tests.conftest import Archived
 from tests.viewer.test_playback import free_port, listening_addresses
 from tracking.rig import load_rig
@@ -165,7 +165,7 @@ def test_live_streams_every_schema_of_the_archive_to_a_foxglove_client(installat
                             # beside it (frames recorded only, to keep up) cannot leave it without an estimate, nor
                             # without a change of the cone's state (each is a log message)
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
+    with stopped_after(proc) as output:
         deadline = time.monotonic() + START_TIMEOUT_S
         line = ""
         while "foxglove: ws://" not in line and time.monotonic() < deadline and proc.poll() is None:
@@ -174,10 +174,8 @@ def test_live_streams_every_schema_of_the_archive_to_a_foxglove_client(installat
         assert listening_addresses(port) == {"127.0.0.1"}  # on this machine only, unless --bind says otherwise
         decoded, topics = asyncio.run(one_of_each_schema(f"ws://127.0.0.1:{port}", wanted, live_topics,
                                                          STREAM_TIMEOUT_S))
-    finally:
-        output = stop(proc)  # what the session printed: whether it estimated at all, where it hung
-    assert proc.returncode in (0, 130), output
-    assert set(decoded) == wanted, f"{wanted - set(decoded)}; the session printed: {output}"
+    assert proc.returncode in (0, 130), output[0]
+    assert set(decoded) == wanted, f"{wanted - set(decoded)}; the session printed: {output[0]}"
     assert topics == live_topics  # the archive's channels, the same names and schemas
     offset = decoded["topside.ConeOffset"]
     known = np.isfinite([offset.dx, offset.dy, offset.dz]).all()

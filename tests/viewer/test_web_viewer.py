@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser import chromium, serving, stop, web_viewer
+from tests.browser import chromium, serving, stopped_after, web_viewer
 from tests.viewer.test_playback import free_port
 from viewer.superintendent import ROOT
 
@@ -24,7 +24,7 @@ def test_the_live_web_view_shows_every_cone_panel_on_a_tablet(installation: Path
                              "--rrd", str(tmp_path / "live.rrd"), "--web", "--web-port", str(web_port),
                              "--grpc-port", str(grpc_port), "--speed", "0.03"],  # 0.8 s of video over 27 s: its cone
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # shown for its last 0.2 s (7 s)
-    try:
+    with stopped_after(proc) as output:
         deadline = time.monotonic() + START_TIMEOUT_S
         line = ""
         while "web viewer: http" not in line and time.monotonic() < deadline and proc.poll() is None:
@@ -41,9 +41,7 @@ def test_the_live_web_view_shows_every_cone_panel_on_a_tablet(installation: Path
         assert {name for _, name, _ in state.views} >= {"cone A", "cameras"}
         assert image.shape[:2] == (800, 1280)  # a 10-inch tablet's page
         assert t_views <= t_ring <= PAGE_TIMEOUT_S
-    finally:
-        output = stop(proc)
-    assert proc.returncode in (0, 130), output
+    assert proc.returncode in (0, 130), output[0]
 
 
 
@@ -58,16 +56,14 @@ def test_a_window_of_a_live_recording_opens_with_the_superintendents_layout(inst
     view = subprocess.Popen([sys.executable, "-m", "tracking.cli", "view", str(tmp_path / "live.rrd"), "--from",
                              "100.3", "--web", "--web-port", str(web_port), "--grpc-port", str(grpc_port)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # cut inside a segment
-    try:
+    with stopped_after(view) as output:
         url = view.stdout.readline().strip()
         assert url.startswith(f"http://127.0.0.1:{web_port}/"), view.stderr.read() if view.poll() else url
         with web_viewer(url) as page:  # `rrd split` alone left the window an empty layout: no view at all
             _, state = page.wait_for_state(lambda s: f"/{ROOT}/targets/A" in {o for _, _, o in s.views},
                                            PAGE_TIMEOUT_S)
         assert {"cone A", "cameras"} <= {name for _, name, _ in state.views}
-    finally:
-        output = stop(view)
-    assert view.returncode in (0, 130), output
+    assert view.returncode in (0, 130), output[0]
 
 
 LATE_OPEN_S = 14.0  # issue 37: a tablet opened a minute into a set-down showed the installation that far back; the

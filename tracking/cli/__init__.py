@@ -93,7 +93,10 @@ def main() -> None:
         return
     signal.signal(signal.SIGTERM, _interrupt)
     if hasattr(signal, "SIGUSR1"):  # `kill -USR1 <pid>`: every thread's stack on stderr, the command runs on
-        faulthandler.register(signal.SIGUSR1, all_threads=True)
+        try:
+            faulthandler.register(signal.SIGUSR1, all_threads=True)
+        except (AttributeError, ValueError, OSError):  # a stderr that is no file (None, captured in memory)
+            pass
     sys.argv[1:] = _ray_address_optional(sys.argv[1:])
     try:
         code = app(standalone_mode=False)
