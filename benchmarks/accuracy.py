@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from benchmarks.scenes import exact_calibrations
 from tracking.detection import DEFAULT_REFINEMENT, Detections, MarkerDetection, Refinement
 from tracking.estimate import ConeEstimate
 from tracking.estimator import ESTIMATORS
@@ -85,7 +86,7 @@ def render(name: str, fps: float, weather: dict | None = None, duration: float |
     tag = "".join(f"-{k}{v}" for k, v in (weather or {}).items()) + (f"-{duration:g}s" if duration else "")
     out = CACHE / f"{name}{WEATHER}-{fps:g}fps{tag}"
     if (out / "truth.csv").is_file():
-        return out
+        return exact_calibrations(out)
     sc = load_scenario(name + WEATHER)
     sc = sc.model_copy(update={"cameras": [c.model_copy(update={"fps": fps}) for c in sc.cameras],
                                "weather": sc.weather.model_copy(update=weather or {})})

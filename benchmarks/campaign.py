@@ -38,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.accuracy import detect, frame, measure
+from benchmarks.scenes import exact_calibrations
 from tracking.estimator import TopsideFilter, filter_frame, smoothed_estimates
 from tracking.estimator.measurements import frames as _frames
 from tracking.evaluate import truth_at
@@ -69,7 +70,7 @@ def render(seed: int) -> Path:
 
     out = CACHE / f"random-{seed}"
     if (out / "scenario.yaml").is_file():
-        return out
+        return exact_calibrations(out)
     sc = random_scenario(seed)
     partial = out.with_name(out.name + ".partial")
     partial.mkdir(parents=True, exist_ok=True)
