@@ -367,7 +367,7 @@ def fuse(rig: Rig, results: list[FrameResult]) -> tuple[TopsideFilter, list[Cone
 def cone_checks(rig: Rig, estimates: list[ConeEstimate], sights: list[MarkerSight],
                 lens: Callable[[str, float], str] = lambda cone, worst: "") -> list[ConeCheck]:
     """A verdict per cone from its σ (the filter's covariance) and the cameras that see a topside marker at it; lens
-    names a camera whose stated calibration error holds a cone's σ up (lens_reason)."""
+    names a camera whose calibration error holds a cone's σ up (lens_reason)."""
     by_id = rig.marker_by_id
     topside = [s for s in sights if s.counts and by_id[s.marker].body == "topside"]
     everyone = tuple(sorted({s.camera for s in topside}))
@@ -453,22 +453,21 @@ def depth_reason(e: ConeEstimate, cameras: tuple[str, ...], rig: Rig, cone: str)
             "measure that axis")
 
 
-LENS_NOTE_SHARE = 0.5  # a camera's calibration is named when what its stated error alone leaves is this much of σ
+LENS_NOTE_SHARE = 0.5  # a camera's calibration is named when what its error alone leaves is this much of σ
 
 
-def lens_reason(lens: dict[str, np.ndarray], model_px: dict[str, float], worst: float,
-                unstated: frozenset[str] = frozenset()) -> str:
-    """'; CAM's calibration states ... px ...' when the σ one camera's calibration error (model_px: camera -> px, as
-    the floor takes it; unstated: the cameras whose calibration states none, taken as camera.UNSTATED_RMS_PX) alone
-    gives a cone's estimate (lens: camera -> (3,) m, in its share, tracking.estimator.disagreement.lens_sigmas) is
-    LENS_NOTE_SHARE of its worst σ or more, else ''."""
+def lens_reason(lens: dict[str, np.ndarray], calibrations: dict[str, CameraModel], worst: float) -> str:
+    """'; CAM's calibration states ... px ...' when the σ one camera's calibration error (CameraModel.model_px: the
+    stated RMS, or UNSTATED_RMS_PX where it states none) alone gives a cone's estimate (lens: camera -> (3,) m, in its
+    share, tracking.estimator.disagreement.lens_sigmas) is LENS_NOTE_SHARE of its worst σ or more, else ''."""
     if not lens:
         return ""
     camera, sigma = max(lens.items(), key=lambda item: float(item[1].max()))
     if not float(sigma.max()) >= LENS_NOTE_SHARE * worst:
         return ""
-    states = "states no error, taken as" if camera in unstated else "states"
-    return (f"; {camera}'s calibration {states} {model_px.get(camera, 0.0):.2f} px RMS error, which alone leaves "
+    model = calibrations[camera]
+    states = "states no error, taken as" if model.rms is None else "states"
+    return (f"; {camera}'s calibration {states} {model.model_px:.2f} px RMS error, which alone leaves "
             f"σ {float(sigma.max()) * 1000:.0f} mm in the estimate, across its line of sight (no number of frames "
             "averages it away): a better calibration, a longer lens or a second camera would lower it")
 
@@ -545,9 +544,8 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
     below = {e.cone: float((point_offset_matrix(cone_points(rig)[e.cone]) @ kf.x[:STATE])[2]) for e in estimates
              if e.withheld == WITHHELD_BELOW}  # the offset the filter withheld, at the end
     topside = topside_pose(kf.x) if kf.topside_placed else None
-    model_px = {name: cam.model_px for name, cam in kf.cameras.items()}
-    unstated = frozenset(name for name, run in runs.items() if run.tracker.camera.rms is None)
+    calibrations = {name: run.tracker.camera for name, run in runs.items()}
     checks = cone_checks(rig, estimates, sights,
                          lambda cone, worst: lens_reason(lens_sigmas(kf.disagreement, cone, kf.time or 0.0),
-                                                         model_px, worst, unstated))
+                                                         calibrations, worst))
     return CheckReport(rig, seconds, cameras, disagreements, checks, warnings, topside, kf.scale, below)

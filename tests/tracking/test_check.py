@@ -431,16 +431,21 @@ def test_a_single_cameras_depth_is_named_as_the_reason(clip: Path) -> None:
 
 
 def test_a_calibrations_stated_error_is_named_where_it_holds_the_cone_up() -> None:
-    """The camera whose stated calibration error alone leaves the most of a cone's σ is named, with that σ, when it
-    is half the σ or more; nothing otherwise."""
+    """The camera whose calibration error alone leaves the most of a cone's σ is named, with that σ, when it is half
+    the σ or more (a calibration that states none, with the error taken for it); nothing otherwise."""
+    from tracking.camera import CameraModel
     from tracking.check import LENS_NOTE_SHARE, lens_reason
 
     lens = {"cam_1": np.array([0.03, 0.02, 0.0]), "cam_2": np.array([0.005, 0.005, 0.005])}
-    model_px = {"cam_1": 0.9, "cam_2": 0.3}
-    text = lens_reason(lens, model_px, worst=0.04)
+    K = np.array([[2000.0, 0, 460], [0, 2000.0, 300], [0, 0, 1]])
+    calibrations = {"cam_1": CameraModel(K, np.zeros(5), 920, 600, rms=0.9),
+                    "cam_2": CameraModel(K, np.zeros(5), 920, 600, rms=0.3)}
+    text = lens_reason(lens, calibrations, worst=0.04)
     assert "cam_1's calibration states 0.90 px RMS error" in text and "σ 30 mm" in text
-    assert lens_reason(lens, model_px, worst=0.031 / LENS_NOTE_SHARE) == ""
-    assert lens_reason({}, model_px, worst=0.04) == ""
+    unstated = {**calibrations, "cam_1": dataclasses.replace(calibrations["cam_1"], rms=None)}
+    assert "cam_1's calibration states no error, taken as 0.50 px RMS error" in lens_reason(lens, unstated, 0.04)
+    assert lens_reason(lens, calibrations, worst=0.031 / LENS_NOTE_SHARE) == ""
+    assert lens_reason({}, calibrations, worst=0.04) == ""
 
 
 def test_a_poor_calibration_is_named_as_the_reason(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:

@@ -23,11 +23,10 @@ it sees is not shown until that camera is compared, for DISAGREEMENT_WAIT_S at m
 put the board's halves 5-10σ apart before anything said they disagree; a third joining later pulled them 5σ off).
 
 A camera alone, or cameras not yet compared, show no disagreement, yet each carries its calibration's error: the RMS
-reprojection error the calibration states, or an assumed one where it states none (model_px, CameraModel.model_px). Each
-frame's offsets also carry the variance that
-error gives them across the camera's line of sight to each cone (_lens_at), weighted as the residuals are; a cone's
-reported variance is at least Σ share² of its cameras' (their residuals' weights aged to now), or the disagreement's
-where that is more.
+reprojection error the calibration states, or an assumed one where it states none (model_px, CameraModel.model_px).
+Each frame's offsets also carry the variance that error gives them across the camera's line of sight to each cone
+(_lens_at), weighted as the residuals are; a cone's reported variance is at least Σ share² of its cameras' (their
+residuals' weights aged to now), or the disagreement's where that is more.
 """
 
 from __future__ import annotations
@@ -53,7 +52,7 @@ DISAGREEMENT_MIN_SHARE = 0.1  # a camera whose frames carry less of a cone's est
 DISAGREEMENT_WINDOW_S = 2.0  # a camera counts for a cone while its last frame of it is this recent
 DISAGREEMENT_WAIT_S = 0.5  # a cone waits this long at most for a camera new to it to be compared (a camera whose fits
 # are ambiguous, or that shows the cone for a frame or two, must not hide it for long)
-LENS_SHARE = float(np.sqrt(2.0))  # (no unit) × a calibration's stated RMS reprojection error × depth / f: how far a
+LENS_SHARE = float(np.sqrt(2.0))  # (no unit) × a calibration's RMS reprojection error × depth / f: how far a
 # camera's own offset at a cone is off an axis across its line of sight, for as long as its markers stay in that part
 # of the picture (no number of its frames averages it away). Each marker's image is taken as missed by model_px an
 # axis (the RMS read as each axis's σ, as the corners' noise reads it: measurements._corner_covariance), its two
@@ -135,7 +134,7 @@ class Disagreement:
     versions: dict[int, int] = field(default_factory=dict)  # cone index -> residuals kept so far
     _cache: dict[int, tuple] = field(default_factory=dict)  # cone index -> ((cameras, version), its floor (3,))
     points: np.ndarray = field(init=False)  # (C, 3) the cones' points in the jacket frame (H's [:, 3:6] = -[r]×)
-    stated: bool = False  # a camera's calibration stated an error: until then no cone has a lens floor to take
+    lensed: bool = False  # a camera's calibration error (model_px) is above 0: until then no cone has a lens floor
 
     def __post_init__(self) -> None:
         self.points = -np.stack([self.H[:, 2, 4], self.H[:, 0, 5], self.H[:, 1, 3]], axis=1)
@@ -167,7 +166,7 @@ class Disagreement:
         fits = np.einsum("sij,jk,sik->s", H[:, :, :6], cov, H[:, :, :6])  # traces: the fits' σ² at each cone
         filtered = np.einsum("sij,jk,sik->s", H, P[:STATE, :STATE], H)  # and the filter's own
         lens = _lens_at(o, self.points[seen])  # (S, 3)
-        self.stated = self.stated or o.model_px > 0.0
+        self.lensed = self.lensed or o.model_px > 0.0
         residuals = H @ (own - x[:STATE])
         return [(k, residuals[i], 1.0 / v, lens[i]) for i, (k, v) in enumerate(zip(seen, fits + filtered,
                                                                                     strict=True))
@@ -194,7 +193,7 @@ class Disagreement:
         for k, cameras in self.by_cone.items():
             recent = [c for c, t in cameras.items() if time - t <= DISAGREEMENT_WINDOW_S]
             cone = self.names[k]
-            if self.stated:  # every camera that made the estimate, not only recent ones: its error stays
+            if self.lensed:  # every camera that made the estimate, not only recent ones: its error stays
                 out[k] = _lens([m for c in cameras if (m := self.moments.get((c, cone))) is not None and m.w > 0.0],
                                time)
             if len(recent) < 2:
@@ -211,7 +210,7 @@ class Disagreement:
 
 
 def lens_sigmas(d: Disagreement, cone: str, time: float) -> dict[str, np.ndarray]:
-    """Per camera that has shown a cone's pair, the σ (3,) its calibration's stated error gives the cone's estimate at
+    """Per camera that has shown a cone's pair, the σ (3,) its calibration's error gives the cone's estimate at
     a time, m: its own (_lens_at, as its frames weighed it) in its share of the estimate (_lens)."""
     ms = {c: m for (c, name), m in d.moments.items() if name == cone and m.w > 0.0}
     shares = _shares(list(ms.values()), time)
