@@ -10,6 +10,8 @@ import numpy as np
 
 TOLERANCE_M = 0.150  # concentricity requirement (paper, section I-D): the band every view and table shows
 WITHHELD_SIGMA = "σ too large"  # the cameras do not see the cone well enough
+WITHHELD_WARMING = "warming up"  # σ within the limit, but not yet within the tighter one of the first seconds after the
+# topside is placed (REPORT_WARMUP_S, REPORT_WARMUP_SIGMA_SIDES): the poses are new and their errors not yet Gaussian
 WITHHELD_CLOCKS = "clocks not measured"  # σ within bounds but for the topside's motion over its cameras' clock σ
 WITHHELD_SCALE = "rig error: marker size"  # the markers do not look the size the rig states (tracking.scale)
 WITHHELD_COMPARING = "cameras not yet compared"  # two cameras see the cone and one new to it has too few frames yet to

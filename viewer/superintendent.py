@@ -38,6 +38,7 @@ from tracking.estimate import (
     WITHHELD_COMPARING,
     WITHHELD_SCALE,
     WITHHELD_SIGMA,
+    WITHHELD_WARMING,
     ConeEstimate,
     axes_above,
     sigma_text,
@@ -154,16 +155,20 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
         return WITHHELD_COMPARING if short else (
             "two cameras see this cone and one has too few frames yet to tell whether they agree: real lenses put the "
             "same offset millimetres apart, which no single frame shows (shown within half a second)")
-    if short:  # not the limit: the reading does not say whether the warm-up's or the later one (50 mm) held
-        return WITHHELD_SIGMA
     sigma = reading.axis_sigma
     figures = f" (σ {sigma_text(sigma)})" if np.isfinite(sigma).all() else ""
+    if reading.withheld == WITHHELD_WARMING:
+        return WITHHELD_WARMING if short else (
+            f"warming up: for the first {REPORT_WARMUP_S:g} s after the topside is placed a cone is shown only with "
+            f"σ below {REPORT_WARMUP_SIGMA_SIDES:.1%} of a marker side ({REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for "
+            f"1 m markers){figures}: the cameras' first poses are not yet settled")
+    if short:
+        return WITHHELD_SIGMA
     poor = axes_above(sigma, REPORT_MAX_SIGMA_M)
     along = f" along {poor} (a camera seeing it from another side would measure that)" if poor else ""
     known = axes_text(reading.offset, sigma)
-    return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm ({REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for 1 m markers in "
-            f"the first {REPORT_WARMUP_S:g} s after the topside is placed){figures}: the cameras do not see this cone "
-            f"well enough{along}" + (f". Measured: {known}" if known else ""))
+    return (f"1σ above {REPORT_MAX_SIGMA_M * 1e3:.0f} mm{figures}: the cameras do not see this cone well "
+            f"enough{along}" + (f". Measured: {known}" if known else ""))
 
 
 def axes_text(offset: np.ndarray, sigma: np.ndarray) -> str:

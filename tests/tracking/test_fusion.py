@@ -10,7 +10,7 @@ import pytest
 
 from tracking.camera import CameraModel
 from tracking.detection import MarkerDetection
-from tracking.estimate import WITHHELD_CLOCKS, WITHHELD_SIGMA
+from tracking.estimate import WITHHELD_CLOCKS, WITHHELD_SIGMA, WITHHELD_WARMING
 from tracking.estimator import TopsideFilter, fused_estimates, smoothed_estimates
 from tracking.estimator.measurements import shape_kept
 from tracking.estimator.noise import REPORT_WARMUP_S, VIEW, VIEW_BIAS_TAU_S, VIEW_SHAPE_RENEW
@@ -447,7 +447,10 @@ def test_the_warm_up_limit_scales_with_the_markers() -> None:
         estimates = kf.cone_estimates(kf.x, P, 0.0, (), warming=True)
         assert estimates
         assert all(np.isfinite(e.offset).all() == shown for e in estimates), size
+        assert all(e.withheld == ("" if shown else WITHHELD_WARMING) for e in estimates), size  # said as such
         assert all(np.isfinite(e.offset).all() for e in kf.cone_estimates(kf.x, P, 0.0, (), warming=False))
+        P[:3, :3] = np.eye(3) * 0.06**2  # beyond the limit after the warm-up too: the cameras', not the warm-up's
+        assert {e.withheld for e in kf.cone_estimates(kf.x, P, 0.0, (), warming=True)} == {WITHHELD_SIGMA}
 
 
 def test_a_long_run_is_smoothed_piece_by_piece() -> None:

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 from rerun.chunk import RrdReader
 
-from tracking.estimate import WITHHELD_CLOCKS, WITHHELD_SCALE, ConeEstimate
+from tracking.estimate import WITHHELD_CLOCKS, WITHHELD_SCALE, WITHHELD_WARMING, ConeEstimate
 from viewer.readback import chunks_by_entity, component_rows
 from viewer.superintendent import ConeState, clock_text, cone_markdown, cone_reading, cones_line, no_data_reason
 
@@ -99,6 +99,11 @@ def test_cone_states() -> None:
     untimed = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_CLOCKS), "A", 10.1, 10.05)
     assert no_data_reason(untimed, short=True) == "clocks not measured" and "topside sync" in cone_markdown(untimed)
     assert viewer_safe(cone_markdown(untimed))
+    warming = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_WARMING,
+                                               covariance=np.diag([0.03, 0.02, 0.01]) ** 2), "A", 10.1, 10.05)
+    assert no_data_reason(warming, short=True) == "warming up"  # not "σ too large": it would be shown in a second
+    assert "first 4 s" in cone_markdown(warming) and "(σ Δx 30 · Δy 20 · Δz 10 mm)" in cone_markdown(warming)
+    assert viewer_safe(cone_markdown(warming))
     wrong = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_SCALE), "A", 10.1, 10.05)
     assert no_data_reason(wrong, short=True) == "rig error: marker size" and "topside check" in cone_markdown(wrong)
     assert viewer_safe(cone_markdown(wrong))

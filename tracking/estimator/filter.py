@@ -21,6 +21,7 @@ from tracking.estimate import (
     WITHHELD_COMPARING,
     WITHHELD_SCALE,
     WITHHELD_SIGMA,
+    WITHHELD_WARMING,
     ConeEstimate,
 )
 from tracking.estimator.disagreement import Disagreement
@@ -325,7 +326,7 @@ class TopsideFilter(FilterState):
         timed_sds = sds if timeds is covs else np.sqrt(np.diagonal(timeds, axis1=1, axis2=2)).tolist()
         mismatch = self.scale.mismatch  # every offset scaled: once a time, not once a cone
         for k, (cone, offset, cov, sd, timed_sd) in enumerate(zip(names, offsets, covs, sds, timed_sds, strict=True)):
-            withheld = self._withheld(float(offset[2]), sd, timed_sd, limit, mismatch, bool(pending[k]))
+            withheld = self._withheld(float(offset[2]), sd, timed_sd, limit, mismatch, bool(pending[k]), warming)
             if withheld in (WITHHELD_SIGMA, WITHHELD_CLOCKS) and cone in measured and not warming:  # its axes
                 offset = np.where(np.array(sd) > limit, np.nan, offset)  # within the limit stay: one camera sees
                 # height, not depth. Not at a cone no pair measures (its axes all lean on the topside's turn over tens
@@ -335,17 +336,20 @@ class TopsideFilter(FilterState):
         return out
 
     def _withheld(self, dz: float, sd: list[float], timed_sd: list[float], limit: float, mismatch: bool,
-                  comparing: bool = False) -> str:
+                  comparing: bool = False, warming: bool = False) -> str:
         """Why a cone's offset of Δz dz and σ per axis sd (3,) is not shown (empty: it is): a rig error (mismatch: the
         markers are not the size the rig states), σ beyond limit (the clocks' fault when its σ with exact clocks,
-        timed_sd, would have been shown), or a camera new to it not yet compared with the others (comparing)."""
+        timed_sd, would have been shown; the warm-up's when warming and it is within REPORT_MAX_SIGMA_M), or a camera
+        new to it not yet compared with the others (comparing)."""
         if mismatch:  # every offset scaled
             return WITHHELD_SCALE
         if below_cones(dz, sd[2]):  # no set-down can be there
             self.below = (self.below[0] + 1, min(self.below[1], dz))
             return WITHHELD_BELOW
         if max(sd) > limit:
-            return WITHHELD_CLOCKS if max(timed_sd) <= limit else WITHHELD_SIGMA
+            if max(timed_sd) <= limit:
+                return WITHHELD_CLOCKS
+            return WITHHELD_WARMING if warming and max(sd) <= REPORT_MAX_SIGMA_M else WITHHELD_SIGMA
         return WITHHELD_COMPARING if comparing else ""
 
 
