@@ -78,7 +78,8 @@ def test_track_fused_is_the_default(run: Run, installation: Path, tmp_path: Path
     truth = np.array([motion(t) for t in df["time"]])
     err = df[["dx", "dy", "dz"]].to_numpy() - truth
     shown = np.isfinite(err).all(axis=1)
-    assert set(df["withheld"][~shown]) == {"σ too large", "cameras not yet compared"}  # until both are compared
+    assert set(df["withheld"][~shown]) == {"σ too large", "warming up", "cameras not yet compared"}  # until both
+    # are compared, and under the warm-up's limit
     assert shown[-6:].all() and np.abs(err[shown]).max() < 0.01  # each camera's depth is covered by the other's
     assert (df[["sdx", "sdy", "sdz"]].to_numpy()[shown] < 0.05).all()  # lateral axis
     row = next(line for line in proc.stdout.splitlines() if line.strip("│ ").startswith("A "))  # the cones table
@@ -131,6 +132,18 @@ def test_calibrate_cli(run: Run, shared_data: Path, tmp_path: Path) -> None:
     from tracking.camera import load_camera
 
     assert load_camera(tmp_path / "cam.yaml").K[0, 0] == pytest.approx(532.8, abs=1)
+
+
+def test_calibrate_from_a_video(run: Run, shared_data: Path, tmp_path: Path) -> None:
+    video = shared_data / "caliscope/post_optimization/calibration/extrinsic/cam_1.mp4"
+    proc = run("calibrate", video, "--board", "charuco:4x5:0.054:0.0405:DICT_4X4_1000", "--inverted",
+               "-o", tmp_path / "cam.yaml")
+    assert proc.returncode == 0, proc.stderr
+    assert "from 1 file" in proc.stdout and "cam_1.mp4#" in proc.stdout
+    from tracking.camera import load_camera
+
+    camera = load_camera(tmp_path / "cam.yaml")
+    assert camera.K[0, 0] == pytest.approx(760.33, rel=0.03) and camera.rms is not None and camera.rms < 0.3
 
 
 def test_calibrate_warns_partial_coverage(run: Run, shared_data: Path, tmp_path: Path) -> None:
