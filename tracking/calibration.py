@@ -1,4 +1,7 @@
-"""Camera calibration from chessboard or ChArUco photos (OpenCV's calibrateCamera)."""
+"""Camera calibration from photos or videos of a chessboard or ChArUco board (OpenCV's calibrateCamera).
+
+A video gives a view in every frame that shows the board; of those, at most VIDEO_VIEWS spread over the board's poses
+are used (farthest first: a board held still for seconds is one view, not a hundred)."""
 
 from __future__ import annotations
 
@@ -12,7 +15,7 @@ import numpy as np
 
 from tracking.camera import CameraModel
 from tracking.errors import InputError
-from tracking.images import read_gray
+from tracking.images import frames, is_image, read_gray
 
 MIN_VIEWS = 3
 MIN_CHARUCO_CORNERS = 6
@@ -26,6 +29,8 @@ COVERAGE_WARN = 0.6  # warn below this share of cells holding a corner
 # of its extent, moved across the picture by tens of percent.
 SAME_POSE_SHARE = 0.005
 MIN_SHARED_CORNERS = 4  # fewer shared corners (ChArUco views of different parts of the board): distinct views
+VIDEO_VIEWS = 40  # views taken from one video at most: calibrateCamera's cost grows with them, and 40 poses spread
+# over a video pin a pinhole and five distortion terms (OpenCV's samples use 10-25 photos)
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 
 
@@ -75,11 +80,17 @@ def parse_board(text: str) -> BoardSpec:
 
 @dataclass
 class BoardView:
-    """Board corners found in one photo: image points (N, 2) and their board points (N, 3)."""
+    """Board corners found in one photo or one frame of a video: image points (N, 2) and their board points (N, 3)."""
 
     path: Path
     image_points: np.ndarray
     object_points: np.ndarray
+    frame: int | None = None  # the frame's number in a video (None: a photo)
+
+    @property
+    def name(self) -> str:
+        """The photo's file name, or the video's with the frame's number: 'cam_0.mp4#17'."""
+        return self.path.name if self.frame is None else f"{self.path.name}#{self.frame}"
 
 
 def find_chessboard(gray: np.ndarray, board: BoardSpec, window: int = SUBPIX_WINDOW
@@ -92,11 +103,14 @@ def find_chessboard(gray: np.ndarray, board: BoardSpec, window: int = SUBPIX_WIN
     return corners.reshape(-1, 2), board.object_points()
 
 
-def find_charuco(gray: np.ndarray, board: BoardSpec, window: int = SUBPIX_WINDOW
+def find_charuco(gray: np.ndarray, board: BoardSpec, window: int = SUBPIX_WINDOW, inverted: bool = False
                  ) -> tuple[np.ndarray, np.ndarray] | None:
-    """ChArUco corners (interpolated from the markers, sub-pixel), or None when too few are found."""
+    """ChArUco corners (interpolated from the markers, sub-pixel), or None when too few are found; inverted: the
+    markers are printed white on black (found either way)."""
     cboard = board.charuco_board()
-    detector = cv2.aruco.CharucoDetector(cboard)
+    params = cv2.aruco.DetectorParameters()
+    params.detectInvertedMarker = inverted
+    detector = cv2.aruco.CharucoDetector(cboard, cv2.aruco.CharucoParameters(), params)
     corners, ids, _, _ = detector.detectBoard(gray)
     if ids is None or len(ids) < MIN_CHARUCO_CORNERS:
         return None
@@ -104,16 +118,52 @@ def find_charuco(gray: np.ndarray, board: BoardSpec, window: int = SUBPIX_WINDOW
     return img.reshape(-1, 2).astype(np.float32), obj.reshape(-1, 3).astype(np.float32)
 
 
-def find_board(path: Path, board: BoardSpec, window: int = SUBPIX_WINDOW
-               ) -> tuple[BoardView | None, tuple[int, int]]:
-    """Board corners in one photo (None when not found) and the photo's size (w, h)."""
-    gray = read_gray(path)
-    finder = find_chessboard if board.kind == "chessboard" else find_charuco
-    found = finder(gray, board, window)
+def find_board(path: Path, board: BoardSpec, window: int = SUBPIX_WINDOW, inverted: bool = False,
+               gray: np.ndarray | None = None, frame: int | None = None) -> tuple[BoardView | None, tuple[int, int]]:
+    """Board corners in one photo, or in one frame of a video given as gray (None when not found), and the picture's
+    size (w, h)."""
+    gray = read_gray(path) if gray is None else gray
+    if board.kind == "chessboard":
+        found = find_chessboard(gray, board, window)
+    else:
+        found = find_charuco(gray, board, window, inverted)
     size = (gray.shape[1], gray.shape[0])
     if found is None:
         return None, size
-    return BoardView(path, found[0], found[1]), size
+    return BoardView(path, found[0], found[1], frame), size
+
+
+def video_views(path: Path, board: BoardSpec, window: int = SUBPIX_WINDOW, inverted: bool = False
+                ) -> tuple[list[BoardView], int, tuple[int, int] | None]:
+    """A video's views of the board, at most VIDEO_VIEWS spread over its poses (spread_views); its frames; its
+    pictures' size (w, h), None when it has no frame."""
+    views: list[BoardView] = []
+    size: tuple[int, int] | None = None
+    count = 0
+    for f in frames(path):
+        assert f.gray is not None
+        view, size = find_board(path, board, window, inverted, gray=f.gray, frame=f.index)
+        count += 1
+        if view is not None:
+            views.append(view)
+    return spread_views(views, VIDEO_VIEWS), count, size
+
+
+def spread_views(views: Sequence[BoardView], most: int) -> list[BoardView]:
+    """At most `most` of the views, far apart: the one with the most corners first, then each time the one farthest
+    from those taken (view_distance to the nearest), until none lies SAME_POSE_SHARE or more from them; in their
+    order."""
+    if not views:
+        return []
+    taken = [max(range(len(views)), key=lambda k: len(views[k].image_points))]
+    nearest = np.array([min(view_distance(views[taken[0]], v), view_distance(v, views[taken[0]])) for v in views])
+    while len(taken) < most:
+        k = int(np.argmax(nearest))
+        if nearest[k] < SAME_POSE_SHARE:
+            break
+        taken.append(k)
+        nearest = np.minimum(nearest, [min(view_distance(views[k], v), view_distance(v, views[k])) for v in views])
+    return [views[k] for k in sorted(taken)]
 
 
 @dataclass
@@ -144,28 +194,39 @@ def board_coverage(views: Sequence[BoardView], size: tuple[int, int]) -> float:
 
 def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
               rational: bool = False, subpix_window: int = SUBPIX_WINDOW,
-              progress: Callable[[], None] | None = None) -> CalibrationResult:
-    """Find the board in every photo and calibrate; refuses when fewer than MIN_VIEWS are usable."""
+              progress: Callable[[], None] | None = None, inverted: bool = False) -> CalibrationResult:
+    """Find the board in every photo and in the frames of every video (inverted: ChArUco markers printed white on
+    black) and calibrate; refuses when fewer than MIN_VIEWS are usable."""
     views: list[BoardView] = []
     missed: list[str] = []
     size: tuple[int, int] | None = None
-    for path in paths:
-        view, view_size = find_board(Path(path), board, subpix_window)
+    for path in map(Path, paths):
+        if is_image(path):
+            view, view_size = find_board(path, board, subpix_window, inverted)
+            found = [view] if view is not None else []
+        else:
+            found, count, video_size = video_views(path, board, subpix_window, inverted)
+            if video_size is None:
+                raise InputError(path, "video has no frame (expected a video of the board)")
+            view_size = video_size
         if size is None:
             size = view_size
         elif view_size != size:
             raise InputError(path, f"image size {view_size[0]}x{view_size[1]} differs from the first photo's "
                                    f"{size[0]}x{size[1]} (expected one camera)")
-        if view is None:
-            missed.append(Path(path).name)
-        else:
-            views.append(view)
+        if not found:
+            missed.append(path.name if is_image(path) else f"{path.name} (none of its {count} frames)")
+        views += found
         if progress is not None:
             progress()
     if len(views) < MIN_VIEWS:
+        videos = any(not is_image(p) for p in paths)
+        where = f"{len(views)} distinct views of the photos and videos" if videos else \
+            f"{len(views)} of {len(paths)} photos"
+        hint = "; markers printed white on black need --inverted" if board.kind == "charuco" and not inverted else ""
         raise InputError(paths[0] if paths else "IMAGES",
-                         f"board found in {len(views)} of {len(paths)} photos; need at least {MIN_VIEWS} "
-                         f"usable views (board {board.kind} {board.cols}x{board.rows})")
+                         f"board found in {where}; need at least {MIN_VIEWS} usable views (board {board.kind} "
+                         f"{board.cols}x{board.rows}{hint})")
     poses = distinct_poses(views)
     if len(poses) < MIN_VIEWS:
         raise InputError(views[0].path, f"the board is in {len(views)} photos but at only {len(poses)} distinct "
@@ -187,10 +248,10 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
     camera = CameraModel(K=K, dist=dist.reshape(-1), width=size[0], height=size[1], rms=float(rms))
     return CalibrationResult(
         camera=camera, rms=float(rms),
-        per_view_rms={v.path.name: float(e) for v, e in zip(views, per_view.reshape(-1), strict=True)},
+        per_view_rms={v.name: float(e) for v, e in zip(views, per_view.reshape(-1), strict=True)},
         std_intrinsics=std_named, missed=missed, coverage=board_coverage(views, size), flags=flags,
         rvecs=list(rvecs), tvecs=list(tvecs),
-        repeated={views[k].path.name: views[group[0]].path.name for group in poses for k in group[1:]})
+        repeated={views[k].name: views[group[0]].name for group in poses for k in group[1:]})
 
 
 def view_distance(a: BoardView, b: BoardView) -> float:
@@ -220,6 +281,6 @@ def distinct_poses(views: Sequence[BoardView]) -> list[list[int]]:
 
 def _repeats_text(views: Sequence[BoardView], poses: list[list[int]]) -> str:
     """'b.png, c.png repeat a.png's view; ...' for the groups of more than one view."""
-    parts = [f"{', '.join(views[k].path.name for k in g[1:])} repeat{'s' if len(g) == 2 else ''} "
-             f"{views[g[0]].path.name}'s view" for g in poses if len(g) > 1]
+    parts = [f"{', '.join(views[k].name for k in g[1:])} repeat{'s' if len(g) == 2 else ''} "
+             f"{views[g[0]].name}'s view" for g in poses if len(g) > 1]
     return "; ".join(parts)

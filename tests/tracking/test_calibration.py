@@ -42,6 +42,38 @@ def test_charuco_tutorial(shared_data: Path) -> None:
     assert r.coverage < 0.6  # the board covered part of the image only: the CLI warns
 
 
+CALISCOPE_BOARD = "charuco:4x5:0.054:0.0405:DICT_4X4_1000"  # caliscope's charuco.toml: printed white on black
+CALISCOPE_FX = 903.550124089999  # its camera_array.toml's cam_0, from its own intrinsic footage
+
+
+def test_a_video_of_the_board_calibrates_its_camera(shared_data: Path) -> None:
+    """caliscope's cam_0 filming its hand-held board (111 frames, the markers white on black): the frames that show
+    the board give at most VIDEO_VIEWS views spread over its poses, named by frame; f within 3 % of caliscope's own
+    calibration of that webcam (the board fills a third of the picture, so the distortion is loose: compare f)."""
+    from tracking.calibration import VIDEO_VIEWS
+
+    video = shared_data / "caliscope/charuco_calibration/calibration/extrinsic/cam_0.mp4"
+    r = calibrate([video], parse_board(CALISCOPE_BOARD), inverted=True)
+    assert 10 <= len(r.per_view_rms) <= VIDEO_VIEWS
+    assert all(name.startswith("cam_0.mp4#") for name in r.per_view_rms) and not r.repeated
+    assert r.rms < 0.3
+    assert r.camera.K[0, 0] == pytest.approx(CALISCOPE_FX, rel=0.03)
+    assert (r.camera.width, r.camera.height) == (1280, 720)
+    with pytest.raises(InputError, match="need --inverted"):  # read as black on white, it finds no board
+        calibrate([video], parse_board(CALISCOPE_BOARD))
+
+
+def test_a_board_held_still_is_one_view_of_a_video() -> None:
+    """Of fifty frames of one pose and three others, the spread views are one of the fifty and the three, in order."""
+    from tracking.calibration import spread_views
+
+    still = [_view(f"v#{k}", (0.01 * k, 0.0)) for k in range(50)]
+    moved = [_view("v#60", (60, 0)), _view("v#70", (0, 45)), _view("v#80", (0, 0), tilt=np.radians(20))]
+    names = [v.path.name for v in spread_views(still + moved, 40)]
+    assert len(names) == 4 and names[1:] == ["v#60", "v#70", "v#80"] and names[0].startswith("v#")
+    assert len(spread_views(still + moved, 2)) == 2
+
+
 def test_too_few_views_refused(shared_data: Path) -> None:
     photos = sorted((shared_data / "aruco/opencv-tutorial").glob("img_0*.jpg"))
     with pytest.raises(InputError, match="board found in 0 of 4 photos; need at least 3"):

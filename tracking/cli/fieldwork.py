@@ -40,7 +40,7 @@ LEARNT_SHARE = 0.25  # a marker whose σ the footage cut by less than this share
 
 
 def calibrate(
-    images: Annotated[list[Path], typer.Argument(help="Photos of the board, one camera, several views.")],
+    images: Annotated[list[Path], typer.Argument(help="Photos or videos of the board, one camera, several views.")],
     board: Annotated[str, typer.Option(help="The board, as written above: chessboard:... or charuco:...")],
     out: Annotated[Path, typer.Option("-o", "--out", help="Camera file to write (OpenCV YAML).")],
     fix_aspect: Annotated[bool, typer.Option("--fix-aspect", help="Keep fx = fy (OpenCV's fixed aspect ratio).")
@@ -48,21 +48,24 @@ def calibrate(
     rational: Annotated[bool, typer.Option("--rational", help="8-coefficient rational distortion model.")] = False,
     subpix_window: Annotated[int, typer.Option(help="Half-size of cornerSubPix's window, px (chessboard).",
                                                min=1, max=MAX_SUBPIX_WINDOW)] = SUBPIX_WINDOW,
+    inverted: Annotated[bool, typer.Option("--inverted", help="ChArUco markers printed white on black.")] = False,
 ) -> None:
-    """Calibrate one camera from photos of a chessboard or ChArUco board.
+    """Calibrate one camera from photos or videos of a chessboard or ChArUco board.
 
     --board is chessboard:COLSxROWS:SQUARE (inner corners across and down, the square's side in m), e.g.
     chessboard:9x6:0.025; or charuco:COLSxROWS:SQUARE:MARKER:DICT (squares across and down, the square's and the
-    marker's sides in m, the ArUco dictionary), e.g. charuco:7x5:0.04:0.03:DICT_5X5_100."""
+    marker's sides in m, the ArUco dictionary), e.g. charuco:7x5:0.04:0.03:DICT_5X5_100. A video gives up to 40
+    views spread over the board's poses (the frames that show it)."""
     import tracking.calibration as calib
     from tracking.camera import save_camera
 
     spec = calib.parse_board(board)
     check_outputs({"--out": out}, images)
     with progress_bar() as progress:
-        task = progress.add_task("finding the board", total=len(images), unit="photos")
+        task = progress.add_task("finding the board", total=len(images), unit="files")
         result = calib.calibrate(images, spec, fix_aspect=fix_aspect, rational=rational,
-                                 subpix_window=subpix_window, progress=lambda: progress.advance(task))
+                                 subpix_window=subpix_window, progress=lambda: progress.advance(task),
+                                 inverted=inverted)
     _print_calibration(result, len(images), fix_aspect)
     save_camera(out, result.camera, extra={"nframes": len(result.per_view_rms), "flags": result.flags})
     console.print(f"wrote {out}")
@@ -82,7 +85,8 @@ def _print_calibration(result: CalibrationResult, n_images: int, fix_aspect: boo
     std = dict(result.std_intrinsics)
     if fix_aspect and "fy" in std:  # OpenCV reports 0 for fx, which it derives from fy at the fixed aspect
         std["fx"] = std["fy"] * K[0, 0] / K[1, 1]
-    console.print(f"views used: {len(result.per_view_rms)} of {n_images}")
+    console.print(f"views used: {len(result.per_view_rms)}" + (f" of {n_images}" if n_images >= len(result.per_view_rms)
+                                                               else f" from {n_images} file{'s' * (n_images > 1)}"))
     console.print(f"total RMS reprojection error: {result.rms:.4f} px")
     values = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}
     values.update({n: d[i] for i, n in enumerate(calib.INTRINSIC_NAMES[4:4 + d.size])})
