@@ -64,8 +64,8 @@ def test_the_recording_and_its_archive_give_the_same_report(archived: Archived, 
     assert cone.verdict == Verdict.NOT_LANDED  # the clip hovers 0.4 m above cone A
     assert cone.closest is not None and 0.2 < cone.closest.concentricity < 0.5  # the ramp passes ~0.27 m off, in
     # the frames before cam-ahead (its lone marker seldom settled by IPPE) is compared, and 0.45 m at the first shown
-    assert [p.what for p in cone.no_data] == ["σ too large", "cameras not yet compared"]  # before the second
-    # camera, then before the two are compared
+    assert [p.what for p in cone.no_data] == ["σ too large", "warming up", "cameras not yet compared"]  # before
+    # the second camera, then under the warm-up's limit, then before the two are compared
     out, pdf = tmp_path / "report.html", tmp_path / "report.pdf"
     proc = subprocess.run([*TOPSIDE, "report", str(archived.mcap), "-o", str(out), "--pdf", str(pdf)],
                           capture_output=True, text=True, timeout=120, cwd=REPO)
