@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracking.camera import CameraModel
+from tracking.camera import UNSTATED_RMS_PX, CameraModel
 from tracking.errors import InputError
 from tracking.images import frames, is_image, read_gray
 
@@ -22,7 +22,10 @@ MIN_CHARUCO_CORNERS = 6
 SUBPIX_WINDOW = 5  # half-size, px, as OpenCV's own calibration test; its calibration.cpp sample uses 11
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.1)
 COVERAGE_GRID = 5  # the image is split into COVERAGE_GRID² cells to judge how much the board covered
-COVERAGE_WARN = 0.6  # warn below this share of cells holding a corner
+COVERAGE_WARN = 0.6  # warn below this share of cells holding a corner; below it the file states the lens model's
+# error as at least UNSTATED_RMS_PX: a fit to part of the picture does not vouch for the model's error (caliscope's
+# webcams calibrated from their own footage of the board, which covered 12-28 % of the picture, fit to 0.12-0.24 px,
+# and the tracker trusting that held 70 % of one session's Δz within 2σ and 15.5 % beyond 3σ; at 0.5 px, all)
 # Two views are one pose when the board's shared corners moved on average by less than this share of the board's
 # extent in the image (its bounding box's diagonal): the same photo given twice moves nothing, one re-taken from a
 # tripod a fraction of a pixel; a board tilted by 20° (what tells calibrateCamera the focal length) moves them by 2 %
@@ -170,7 +173,7 @@ def spread_views(views: Sequence[BoardView], most: int) -> list[BoardView]:
 class CalibrationResult:
     """What calibrateCamera found, with its uncertainty and the views it used."""
 
-    camera: CameraModel
+    camera: CameraModel  # its rms: what the file states, the fit's RMS or at least UNSTATED_RMS_PX (COVERAGE_WARN)
     rms: float  # px, over all points
     per_view_rms: dict[str, float]  # photo name -> px
     std_intrinsics: dict[str, float]  # fx, fy, cx, cy, k1, ... -> one standard deviation
@@ -245,11 +248,13 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
         [v.object_points for v in views], [v.image_points for v in views], size, K0, None, flags=flags)
     std = std_intr.reshape(-1)
     std_named = {name: float(std[i]) for i, name in enumerate(INTRINSIC_NAMES[: 4 + dist.size])}
-    camera = CameraModel(K=K, dist=dist.reshape(-1), width=size[0], height=size[1], rms=float(rms))
+    coverage = board_coverage(views, size)
+    stated = float(rms) if coverage >= COVERAGE_WARN else max(float(rms), UNSTATED_RMS_PX)
+    camera = CameraModel(K=K, dist=dist.reshape(-1), width=size[0], height=size[1], rms=stated)
     return CalibrationResult(
         camera=camera, rms=float(rms),
         per_view_rms={v.name: float(e) for v, e in zip(views, per_view.reshape(-1), strict=True)},
-        std_intrinsics=std_named, missed=missed, coverage=board_coverage(views, size), flags=flags,
+        std_intrinsics=std_named, missed=missed, coverage=coverage, flags=flags,
         rvecs=list(rvecs), tvecs=list(tvecs),
         repeated={views[k].name: views[group[0]].name for group in poses for k in group[1:]})
 

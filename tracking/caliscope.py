@@ -219,7 +219,8 @@ def _camera_tables(folder: Path) -> tuple[Path, dict[int, dict[str, Any]]]:
     return path, out
 
 
-def _board(folder: Path) -> Board:
+def session_board(folder: Path) -> Board:
+    """A session folder's board: its charuco.toml (or extrinsic target file), else config.toml's [charuco] table."""
     for charuco in BOARD_FILES:
         if (folder / charuco).is_file():
             return read_board(folder / charuco, _toml(folder / charuco))
@@ -297,7 +298,7 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
     if not folder.is_dir():
         raise InputError(folder, "not a folder (expected a caliscope session folder)")
     videos = folder / "calibration" / "extrinsic" if videos is None else Path(videos)
-    board = _board(folder)
+    board = session_board(folder)
     source, tables = _camera_tables(folder)
     times_path = times_file(videos)
     times = read_times(videos)[1] if times_path is not None else \

@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracking.calibration import BoardView, calibrate, parse_board
+from tracking.calibration import COVERAGE_WARN, BoardView, calibrate, parse_board
+from tracking.camera import UNSTATED_RMS_PX
 from tracking.errors import InputError
 
 PUBLISHED_K = np.array([[532.80992189, 0, 342.4952186], [0, 532.93346422, 233.8879292], [0, 0, 1]])
@@ -24,6 +25,7 @@ def test_opencv_test_calibration_flags_0(left_photos: list[Path]) -> None:
     assert np.abs(r.camera.dist - PUBLISHED_DIST).sum() < 0.05
     assert len(r.per_view_rms) == 13 and not r.missed
     assert set(r.std_intrinsics) >= {"fx", "fy", "cx", "cy", "k1"}
+    assert r.coverage >= COVERAGE_WARN and r.camera.rms == r.rms  # the board over the picture: its fit is stated
 
 
 def test_calibration_sample_fix_aspect(left_photos: list[Path]) -> None:
@@ -39,7 +41,8 @@ def test_charuco_tutorial(shared_data: Path) -> None:
     r = calibrate(photos, parse_board("charuco:5x7:0.04:0.02:DICT_6X6_250"))
     assert r.rms == pytest.approx(0.19, abs=0.03)
     assert 430 < r.camera.K[0, 0] < 500  # four views pin f poorly (README): compare loosely
-    assert r.coverage < 0.6  # the board covered part of the image only: the CLI warns
+    assert r.coverage < COVERAGE_WARN  # the board covered part of the image only: the CLI warns, and the file states
+    assert r.camera.rms == UNSTATED_RMS_PX  # the lens model's error as one that states none, not the fit's 0.19 px
 
 
 CALISCOPE_BOARD = "charuco:4x5:0.054:0.0405:DICT_4X4_1000"  # caliscope's charuco.toml: printed white on black
@@ -56,7 +59,7 @@ def test_a_video_of_the_board_calibrates_its_camera(shared_data: Path) -> None:
     r = calibrate([video], parse_board(CALISCOPE_BOARD), inverted=True)
     assert 10 <= len(r.per_view_rms) <= VIDEO_VIEWS
     assert all(name.startswith("cam_0.mp4#") for name in r.per_view_rms) and not r.repeated
-    assert r.rms < 0.3
+    assert r.rms < 0.3 and r.camera.rms == UNSTATED_RMS_PX  # the board over 28 % of the picture
     assert r.camera.K[0, 0] == pytest.approx(CALISCOPE_FX, rel=0.03)
     assert (r.camera.width, r.camera.height) == (1280, 720)
     with pytest.raises(InputError, match="need --inverted"):  # read as black on white, it finds no board

@@ -101,6 +101,10 @@ def _print_calibration(result: CalibrationResult, n_images: int, fix_aspect: boo
     if result.coverage < calib.COVERAGE_WARN:
         console.print(f"warning: the board covered only {result.coverage:.0%} of the image "
                       "(corners and edges unseen); distortion is poorly determined there", style="yellow")
+    if result.camera.rms is not None and result.camera.rms > result.rms:
+        console.print(f"the file states the lens model's error as {result.camera.rms:.2f} px, not the fit's "
+                      f"{result.rms:.2f}: a fit to part of the picture does not vouch for the rest, and the tracker's "
+                      "σ rests on it (fill the picture with the board for a smaller one)", style="yellow")
 
 
 def detect(
