@@ -128,13 +128,19 @@ def self_calibrated(rig: Rig, board_folder: Path, work: Path) -> tuple[Rig, list
     from tracking.calibration import BoardSpec, calibrate
     from tracking.caliscope import session_board
     from tracking.camera import load_camera, save_camera
+    from tracking.errors import InputError
 
     board = session_board(board_folder)
     spec = BoardSpec("charuco", board.columns, board.rows, board.square_m, board.marker_m, board.dictionary)
     cameras, rows = [], []
     for c in rig.cameras:
-        result = calibrate([rig.resolve(c.source)], spec, inverted=board.inverted)
         theirs = load_camera(rig.resolve(c.calibration))
+        try:
+            result = calibrate([rig.resolve(c.source)], spec, inverted=board.inverted)
+        except InputError as exc:  # e.g. a camera that sees only the board's mirrored back
+            rows.append(f"| {c.name} | — | — | the session's kept: {exc.message} | — | — | {theirs.K[0, 0]:.1f} |")
+            cameras.append(c)
+            continue
         rows.append(f"| {c.name} | {len(result.per_view_rms)} | {result.rms:.3f} | {result.camera.rms:.2f} | "
                     f"{result.coverage:.0%} | {result.camera.K[0, 0]:.1f} | {theirs.K[0, 0]:.1f} |")
         copy = work / f"{c.name}.yaml"
