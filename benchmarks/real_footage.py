@@ -125,13 +125,13 @@ def self_calibrated(rig: Rig, board_folder: Path, work: Path) -> tuple[Rig, list
     """The rig with each camera calibrated by `topside calibrate` from its own video of the session's board
     (board_folder's charuco.toml), the calibrations written into work: what a user with only the footage gets; and a
     table row per camera (views, fit, stated error, coverage, f against the session's own)."""
-    from tracking.calibration import BoardSpec, calibrate
+    from tracking.calibration import calibrate
     from tracking.caliscope import session_board
     from tracking.camera import load_camera, save_camera
     from tracking.errors import InputError
 
     board = session_board(board_folder)
-    spec = BoardSpec("charuco", board.columns, board.rows, board.square_m, board.marker_m, board.dictionary)
+    spec = board.spec()
     cameras, rows = [], []
     for c in rig.cameras:
         theirs = load_camera(rig.resolve(c.calibration))

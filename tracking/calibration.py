@@ -47,6 +47,7 @@ class BoardSpec:
     square: float
     marker: float = 0.0  # charuco only
     dictionary: str = ""  # charuco only
+    legacy: bool = False  # charuco only: OpenCV's pattern before 4.6 (differs on boards with an even number of rows)
 
     def object_points(self) -> np.ndarray:
         """(N, 3) chessboard inner corners in the board frame, row by row."""
@@ -56,7 +57,9 @@ class BoardSpec:
     def charuco_board(self) -> cv2.aruco.CharucoBoard:
         """The OpenCV ChArUco board object."""
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
-        return cv2.aruco.CharucoBoard((self.cols, self.rows), self.square, self.marker, dictionary)
+        board = cv2.aruco.CharucoBoard((self.cols, self.rows), self.square, self.marker, dictionary)
+        board.setLegacyPattern(self.legacy)
+        return board
 
 
 BOARD_FORMS = "chessboard:COLSxROWS:SQUARE or charuco:COLSxROWS:SQUARE:MARKER:DICT"

@@ -17,7 +17,10 @@ its test sessions, cut from longer recordings, keep the original numbers), so it
 Capture times are seconds after the session's first frame. A session without a times file (caliscope's
 post_monocal layout) takes its videos' own presentation times, said so: caliscope records them nominal (k / fps), so
 its cameras' frames are then taken as simultaneous where they were only near it. Cameras caliscope marks `ignore` or
-calibrates as fisheye (which the tracker does not model) are left out and said so. A camera's `rotation_count` is
+calibrates as fisheye (which the tracker does not model) are left out and said so. A camera without intrinsics (or a
+session without camera_array.toml or config.toml, its cameras then the videos there are) is calibrated from its own
+video of the board, the intrinsic one (`calibration/intrinsic/`) where there is one, as `topside calibrate` does, and
+said so. A camera's `rotation_count` is
 how caliscope shows its frames: its trackers turn a frame, detect, and turn the points back, so its intrinsics are the
 video's as recorded.
 """
@@ -37,7 +40,7 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
-from tracking.calibration import BoardSpec
+from tracking.calibration import BoardSpec, calibrate
 from tracking.camera import CameraModel, save_camera
 from tracking.errors import InputError
 from tracking.images import open_video
@@ -68,11 +71,13 @@ class Board:
     inverted: bool = False
     legacy: bool = False  # OpenCV's pattern before 4.6 (differs on boards with an even number of rows)
 
+    def spec(self) -> BoardSpec:
+        """The board as `topside calibrate` takes it."""
+        return BoardSpec("charuco", self.columns, self.rows, self.square_m, self.marker_m, self.dictionary,
+                         legacy=self.legacy)
+
     def opencv(self) -> cv2.aruco.CharucoBoard:
-        board = BoardSpec("charuco", self.columns, self.rows, self.square_m, self.marker_m,
-                          self.dictionary).charuco_board()
-        board.setLegacyPattern(self.legacy)
-        return board
+        return self.spec().charuco_board()
 
     def markers(self, topside_ids: set[int] | None = None) -> list[Marker]:
         """The board's markers in the jacket frame, its centre at the origin; topside_ids (default: the first half by
@@ -197,18 +202,24 @@ def _flag(path: Path, table: dict[str, Any], key: str, within: str | None = None
     return bool(value)
 
 
-def _camera_tables(folder: Path) -> tuple[Path, dict[int, dict[str, Any]]]:
-    """The cameras' tables by number, from camera_array.toml or config.toml."""
+def _camera_tables(folder: Path, videos: Path) -> tuple[Path, dict[int, dict[str, Any]]]:
+    """The cameras' tables by number, from camera_array.toml or config.toml; without either (or with no camera table
+    in config.toml), an empty table for every camera whose video is in videos (to be calibrated from it)."""
     array, config = folder / "camera_array.toml", folder / "config.toml"
     if array.is_file():
         cameras = _toml(array).get("cameras", {})
         path, tables = array, [(str(t.get("cam_id", k)), k, t) for k, t in
                                (cameras.items() if isinstance(cameras, dict) else []) if isinstance(t, dict)]
-    elif config.is_file():
+    elif config.is_file() and any(k.startswith("cam_") for k in _toml(config)):
         path, tables = config, [(str(t.get("port", k.removeprefix("cam_"))), k, t) for k, t in _toml(config).items()
                                 if k.startswith("cam_") and isinstance(t, dict)]
     else:
-        raise InputError(folder, "no camera_array.toml or config.toml (expected a caliscope session folder)")
+        found = sorted({int(m) for n in VIDEO_NAMES for v in videos.glob(n.format("*"))
+                        if (m := v.stem.rpartition("_")[2]).isascii() and m.isdecimal()}) if videos.is_dir() else []
+        if not found:
+            raise InputError(folder, "no camera_array.toml or config.toml, nor cam_N.mp4 videos in "
+                                     f"{videos} (expected a caliscope session folder)")
+        return videos, {n: {} for n in found}
     out = {}
     for number, key, table in tables:
         if not (number.isascii() and number.isdecimal()):
@@ -299,11 +310,11 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
         raise InputError(folder, "not a folder (expected a caliscope session folder)")
     videos = folder / "calibration" / "extrinsic" if videos is None else Path(videos)
     board = session_board(folder)
-    source, tables = _camera_tables(folder)
+    source, tables = _camera_tables(folder, videos)
     times_path = times_file(videos)
     times = read_times(videos)[1] if times_path is not None else \
         video_times({n: v for n in tables if (v := _video(videos, n)) is not None})
-    cameras, left_out = [], []
+    cameras, left_out, notes = [], [], []
     for number, table in sorted(tables.items()):
         name = f"cam_{number}"
         video = _video(videos, number)
@@ -315,12 +326,19 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
             left_out.append(f"{name}: caliscope marks it ignore")
         elif _flag(source, table, "fisheye", name):
             left_out.append(f"{name}: calibrated with caliscope's fisheye model, which the tracker does not model")
-        elif table.get("matrix") is None or table.get("distortions") is None:
-            left_out.append(f"{name}: no intrinsics in {source.name} (calibrate it first)")
         elif video is None:
             left_out.append(f"{name}: no {' or '.join(n.format(number) for n in VIDEO_NAMES)} in {videos}")
         elif number not in times:
             left_out.append(f"{name}: no rows in {times_path.name if times_path else 'its video'}")
+        elif table.get("matrix") is None or table.get("distortions") is None:
+            camera, said = _calibrated(folder, video, number, board)
+            lacking = f"no intrinsics in {source.name}" if source.is_file() else "no camera_array.toml or config.toml"
+            if camera is None:
+                left_out.append(f"{name}: {lacking}, and {said}")
+            else:
+                notes.append(f"{name}: {lacking}: {said}")
+                cameras.append(SessionCamera(number, camera.K, camera.dist, (camera.width, camera.height),
+                                             camera.rms, video))
         else:
             size = table.get("size")
             try:
@@ -338,10 +356,29 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
                                          float(rms) if isinstance(rms, int | float) else None, video))
     if not cameras:
         raise InputError(folder, "no camera can be used: " + "; ".join(left_out or ["none listed"]))
-    notes = [] if times_path is not None else [
-        f"{videos}: no {' or '.join(TIMES_FILES)}: each frame's time is its video's own (caliscope writes them "
-        "nominal, k / fps), so the cameras are taken as synchronised frame by frame"]
+    if times_path is None:
+        notes.append(f"{videos}: no {' or '.join(TIMES_FILES)}: each frame's time is its video's own (caliscope writes "
+                     "them nominal, k / fps), so the cameras are taken as synchronised frame by frame")
     return Session(folder, board, cameras, times, left_out, notes)
+
+
+def _calibrated(folder: Path, video: Path, number: int, board: Board) -> tuple[CameraModel | None, str]:
+    """A camera calibrated from its own video of the board (its intrinsic video where the session has one, else the
+    one it tracks), and what was done, in a few words; None and why where no video of it shows the board enough."""
+    spec = board.spec()
+    intrinsic = _video(folder / "calibration" / "intrinsic", number)
+    why = []
+    for path in ([intrinsic] if intrinsic is not None else []) + [video]:
+        try:
+            result = calibrate([path], spec, inverted=board.inverted)
+        except InputError as exc:
+            why.append(f"{path.relative_to(folder) if path.is_relative_to(folder) else path}: {exc.message}")
+            continue
+        where = path.relative_to(folder) if path.is_relative_to(folder) else path
+        return result.camera, (f"calibrated from {where} ({len(result.per_view_rms)} views, fit {result.rms:.2f} px, "
+                               f"the board over {result.coverage:.0%} of the picture: its error taken as "
+                               f"{result.camera.rms:.2f} px)")
+    return None, "no video of it calibrates it (" + "; ".join(why) + ")"
 
 
 def write_session(session: Session, out: Path, topside_ids: set[int] | None = None,

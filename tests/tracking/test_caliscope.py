@@ -191,7 +191,7 @@ def test_a_dropped_frames_row_shifts_only_the_frames_after_it(caliscope: Path, t
 def test_the_newest_caliscope_layout_is_read(caliscope: Path, tmp_path: Path) -> None:
     """caliscope's newest files: timestamps.csv of cam_id and frame_time alone, the board in
     calibration/targets/extrinsic_charuco.toml without units (inches, its default), an uncalibrated camera's
-    matrix written as the string "null" (left out, and said so)."""
+    matrix written as the string "null" (calibrated from its own video of the board, and said so)."""
     session = session_copy(caliscope, tmp_path)
     path = session / "calibration" / "extrinsic" / "timestamps.csv"
     pd.read_csv(path)[["cam_id", "frame_time"]].to_csv(path, index=False)
@@ -204,7 +204,9 @@ def test_the_newest_caliscope_layout_is_read(caliscope: Path, tmp_path: Path) ->
     start = text.index("[cameras.3]")
     array.write_text(text[:start] + text[start:].replace("matrix = [[", 'matrix = "null"\nold = [[', 1))
     loaded = read_session(session)
-    assert [c.number for c in loaded.cameras] == [0, 1, 2] and any("cam_3: no intrinsics" in x for x in loaded.left_out)
+    assert [c.number for c in loaded.cameras] == [0, 1, 2, 3] and not loaded.left_out
+    assert any(x.startswith("cam_3: no intrinsics in camera_array.toml: calibrated from calibration/extrinsic/cam_3")
+               for x in loaded.notes)
     assert loaded.board.marker_m == pytest.approx(0.0405)
     reference = read_session(caliscope / "post_optimization")
     assert all(np.array_equal(loaded.times[k], reference.times[k]) for k in (0, 1, 2))
@@ -251,3 +253,28 @@ def test_a_session_without_a_times_file_takes_its_videos_own_times_and_says_so(c
         assert np.allclose(times, np.arange(57) / 6.0, atol=1e-5)
     truth = pd.read_csv(out / "truth.csv")
     assert np.allclose(truth["time"], np.arange(57) / 6.0, atol=1e-5)
+
+
+def test_a_session_without_intrinsics_calibrates_each_camera_from_its_own_video(caliscope: Path,
+                                                                                tmp_path: Path) -> None:
+    """No camera_array.toml (only the board, the videos and their times): every camera is calibrated from its own
+    video of the board, said camera by camera, and stated at 0.5 px (the board over 12-28 % of the picture); its focal
+    length within 4 % of caliscope's own calibration, which the test reads from the file it left out."""
+    import tomllib
+
+    from tracking.camera import load_camera
+
+    src = caliscope / "charuco_calibration"
+    session_dir = tmp_path / "no_intrinsics"
+    shutil.copytree(src, session_dir, ignore=shutil.ignore_patterns("camera_array.toml"))
+    out = tmp_path / "out"
+    result = subprocess.run([sys.executable, "-m", "tracking.cli", "import-caliscope", str(session_dir), "-o",
+                             str(out)], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.count("calibrated from calibration/extrinsic/cam_") == 4
+    theirs = tomllib.loads((src / "camera_array.toml").read_text())["cameras"]
+    rig = load_rig(out / "rig.yaml")
+    assert [c.name for c in rig.cameras] == ["cam_0", "cam_1", "cam_2", "cam_3"]
+    for k, c in enumerate(rig.cameras):
+        camera = load_camera(rig.resolve(c.calibration))
+        assert camera.K[0, 0] == pytest.approx(theirs[str(k)]["matrix"][0][0], rel=0.04) and camera.rms == 0.5
