@@ -122,23 +122,20 @@ def without_stated_errors(rig: Rig, work: Path) -> Rig:
 
 
 def self_calibrated(rig: Rig, board_folder: Path, work: Path) -> tuple[Rig, list[str]]:
-    """The rig with each camera calibrated by `topside calibrate` from its own video of the session's board
-    (board_folder's charuco.toml), the calibrations written into work: what a user with only the footage gets; and a
-    table row per camera (views, fit, stated error, coverage, f against the session's own)."""
-    from tracking.calibration import calibrate
-    from tracking.caliscope import session_board
+    """The rig with each camera calibrated from its own video of the session's board (board_folder's charuco.toml) as
+    `topside import-caliscope` does for a camera without intrinsics, the calibrations written into work: what a user
+    with only the footage gets; and a table row per camera (views, fit, stated error, coverage, f against the
+    session's own). A camera no video of which calibrates it keeps the session's calibration."""
+    from tracking.caliscope import calibrate_camera, session_board
     from tracking.camera import load_camera, save_camera
-    from tracking.errors import InputError
 
     board = session_board(board_folder)
-    spec = board.spec()
     cameras, rows = [], []
     for c in rig.cameras:
         theirs = load_camera(rig.resolve(c.calibration))
-        try:
-            result = calibrate([rig.resolve(c.source)], spec, inverted=board.inverted)
-        except InputError as exc:  # e.g. a camera that sees only the board's mirrored back
-            rows.append(f"| {c.name} | — | — | the session's kept: {exc.message} | — | — | {theirs.K[0, 0]:.1f} |")
+        result, said = calibrate_camera(board_folder, rig.resolve(c.source), int(c.name.rpartition("_")[2]), board)
+        if result is None:  # e.g. a camera that sees only the board's mirrored back
+            rows.append(f"| {c.name} | — | — | the session's kept: {said} | — | — | {theirs.K[0, 0]:.1f} |")
             cameras.append(c)
             continue
         rows.append(f"| {c.name} | {len(result.per_view_rms)} | {result.rms:.3f} | {result.camera.rms:.2f} | "
@@ -213,9 +210,10 @@ def main() -> None:
                         help="other caliscope session folders, imported as `topside import-caliscope` does")
     parser.add_argument("--out", type=Path, default=None, help=f"markdown to write (default {RESULTS.name}, or "
                                                                "real_footage-caliscope.md with --sessions)")
-    parser.add_argument("--unstated", action="store_true",
-                        help="track with the calibrations' stated RMS errors removed (files suffixed -unstated)")
-    parser.add_argument("--self-calibrated", action="store_true",
+    calibrations = parser.add_mutually_exclusive_group()
+    calibrations.add_argument("--unstated", action="store_true",
+                              help="track with the calibrations' stated RMS errors removed (files suffixed -unstated)")
+    calibrations.add_argument("--self-calibrated", action="store_true",
                         help="track with each camera calibrated by `topside calibrate` from its own video of the "
                              "session's board (files suffixed -self-calibrated)")
     args = parser.parse_args()
@@ -245,10 +243,11 @@ def main() -> None:
         parts.insert(2, "Calibrations read without their stated RMS error (`--unstated`), as a camera maker's or ROS's "
                         "file comes: each taken as `UNSTATED_RMS_PX` (tracking/camera.py).\n")
     if args.self_calibrated:
-        parts.insert(2, "Every camera calibrated by `topside calibrate` from its own video of the session's board "
-                        "(`--self-calibrated`), not caliscope's calibrations: what a user with only the footage gets. "
-                        "The board covered 12-28 % of each picture, so each file states the lens model's error as "
-                        "0.5 px, not its fit's 0.12-0.24 px (tracking/calibration.py, COVERAGE_WARN).\n")
+        parts.insert(2, "Every camera calibrated from its own video of the session's board (`--self-calibrated`), as "
+                        "`topside calibrate` and `import-caliscope` do, not by caliscope's calibrations: what a user "
+                        "with only the footage gets. A calibration whose board covered under 60 % of the picture "
+                        "states the lens model's error as at least 0.5 px, whatever its fit (tracking/calibration.py, "
+                        "COVERAGE_WARN): each session's table says each camera's.\n")
     text = "\n".join(parts)
     print(text)
     out.write_text(text)

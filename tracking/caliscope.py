@@ -40,7 +40,7 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
-from tracking.calibration import BoardSpec, calibrate
+from tracking.calibration import BoardSpec, CalibrationResult, calibrate
 from tracking.camera import CameraModel, save_camera
 from tracking.errors import InputError
 from tracking.images import open_video
@@ -331,14 +331,14 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
         elif number not in times:
             left_out.append(f"{name}: no rows in {times_path.name if times_path else 'its video'}")
         elif table.get("matrix") is None or table.get("distortions") is None:
-            camera, said = _calibrated(folder, video, number, board)
+            result, said = calibrate_camera(folder, video, number, board)
             lacking = f"no intrinsics in {source.name}" if source.is_file() else "no camera_array.toml or config.toml"
-            if camera is None:
+            if result is None:
                 left_out.append(f"{name}: {lacking}, and {said}")
             else:
                 notes.append(f"{name}: {lacking}: {said}")
-                cameras.append(SessionCamera(number, camera.K, camera.dist, (camera.width, camera.height),
-                                             camera.rms, video))
+                c = result.camera
+                cameras.append(SessionCamera(number, c.K, c.dist, (c.width, c.height), c.rms, video))
         else:
             size = table.get("size")
             try:
@@ -362,22 +362,23 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
     return Session(folder, board, cameras, times, left_out, notes)
 
 
-def _calibrated(folder: Path, video: Path, number: int, board: Board) -> tuple[CameraModel | None, str]:
-    """A camera calibrated from its own video of the board (its intrinsic video where the session has one, else the
-    one it tracks), and what was done, in a few words; None and why where no video of it shows the board enough."""
-    spec = board.spec()
+def calibrate_camera(folder: Path, video: Path, number: int, board: Board
+                     ) -> tuple[CalibrationResult | None, str]:
+    """A session's camera calibrated from its own video of the board (its intrinsic video where the session has one,
+    else the one it tracks), as `topside calibrate` does, and what was done in a few words; None and why where no
+    video of it shows the board enough."""
     intrinsic = _video(folder / "calibration" / "intrinsic", number)
     why = []
     for path in ([intrinsic] if intrinsic is not None else []) + [video]:
-        try:
-            result = calibrate([path], spec, inverted=board.inverted)
-        except InputError as exc:
-            why.append(f"{path.relative_to(folder) if path.is_relative_to(folder) else path}: {exc.message}")
-            continue
         where = path.relative_to(folder) if path.is_relative_to(folder) else path
-        return result.camera, (f"calibrated from {where} ({len(result.per_view_rms)} views, fit {result.rms:.2f} px, "
-                               f"the board over {result.coverage:.0%} of the picture: its error taken as "
-                               f"{result.camera.rms:.2f} px)")
+        try:
+            result = calibrate([path], board.spec(), inverted=board.inverted)
+        except InputError as exc:
+            why.append(f"{where}: {exc.message}")
+            continue
+        return result, (f"calibrated from {where} ({len(result.per_view_rms)} views, fit {result.rms:.2f} px, the "
+                        f"board over {result.coverage:.0%} of the picture: its error taken as "
+                        f"{result.camera.rms:.2f} px)")
     return None, "no video of it calibrates it (" + "; ".join(why) + ")"
 
 

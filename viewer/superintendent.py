@@ -160,8 +160,8 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
     if reading.withheld == WITHHELD_WARMING:
         return WITHHELD_WARMING if short else (
             f"warming up: for the first {REPORT_WARMUP_S:g} s after the topside is placed a cone is shown only with "
-            f"σ below {REPORT_WARMUP_SIGMA_SIDES:.1%} of a marker side ({REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for "
-            f"1 m markers){figures}: the cameras' first poses are not yet settled")
+            f"σ below {REPORT_WARMUP_SIGMA_SIDES:.1%} of a marker side, {REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for "
+            f"1 m markers{figures}: the cameras' first poses are not yet settled")
     if short:
         return WITHHELD_SIGMA
     poor = axes_above(sigma, REPORT_MAX_SIGMA_M)

@@ -110,3 +110,23 @@ def test_views_of_one_pose_are_told_apart_from_distinct_ones() -> None:
     views = [_view("a", (0, 0)), _view("b", (0.3, 0.2)), _view("c", (40, 0)), _view("a-again", (0, 0)),
              _view("d", (0, 0), tilt=np.radians(20))]
     assert distinct_poses(views) == [[0, 1, 3], [2], [4]]
+
+
+def test_a_video_of_a_board_held_still_is_refused_as_one_pose(tmp_path: Path) -> None:
+    """Two seconds of a chessboard that does not move (real H.264 encode and decode): one view, and the error says to
+    move the board while filming, not that no board was found."""
+    import av
+
+    square = 40
+    board = np.kron((np.indices((7, 10)).sum(axis=0) % 2) * 255, np.ones((square, square))).astype(np.uint8)
+    picture = np.full((480, 640), 255, np.uint8)
+    picture[100:100 + board.shape[0], 120:120 + board.shape[1]] = board
+    video = tmp_path / "still.mp4"
+    with av.open(str(video), "w") as out:
+        stream = out.add_stream("libx264", rate=15)
+        stream.width, stream.height, stream.pix_fmt = 640, 480, "yuv420p"
+        for _ in range(30):
+            out.mux(stream.encode(av.VideoFrame.from_ndarray(np.dstack([picture] * 3), format="rgb24")))
+        out.mux(stream.encode())
+    with pytest.raises(InputError, match=r"the board is in 1 view but at only 1 distinct pose.*while filming"):
+        calibrate([video], parse_board("chessboard:9x6:0.025"))

@@ -27,6 +27,14 @@ def caliscope(shared_data: Path) -> Path:
     return folder
 
 
+def import_caliscope(session: Path, out: Path) -> subprocess.CompletedProcess:
+    """`topside import-caliscope SESSION -o OUT`, which must succeed."""
+    result = subprocess.run([sys.executable, "-m", "tracking.cli", "import-caliscope", str(session), "-o", str(out)],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    return result
+
+
 def video_frames(path: Path) -> int:
     with av.open(str(path)) as container:
         return sum(1 for _ in container.decode(video=0))
@@ -242,9 +250,7 @@ def test_a_session_without_a_times_file_takes_its_videos_own_times_and_says_so(c
     session_dir = tmp_path / "post_monocal"
     shutil.copytree(src, session_dir, ignore=shutil.ignore_patterns("timestamps.csv"))
     out = tmp_path / "out"
-    result = subprocess.run([sys.executable, "-m", "tracking.cli", "import-caliscope", str(session_dir), "-o",
-                             str(out)], capture_output=True, text=True, timeout=120)
-    assert result.returncode == 0, result.stderr
+    result = import_caliscope(session_dir, out)
     assert "no timestamps.csv" in result.stderr and "video's own" in result.stderr
     rig = load_rig(out / "rig.yaml")
     for cam in rig.cameras:
@@ -268,9 +274,7 @@ def test_a_session_without_intrinsics_calibrates_each_camera_from_its_own_video(
     session_dir = tmp_path / "no_intrinsics"
     shutil.copytree(src, session_dir, ignore=shutil.ignore_patterns("camera_array.toml"))
     out = tmp_path / "out"
-    result = subprocess.run([sys.executable, "-m", "tracking.cli", "import-caliscope", str(session_dir), "-o",
-                             str(out)], capture_output=True, text=True, timeout=300)
-    assert result.returncode == 0, result.stderr
+    result = import_caliscope(session_dir, out)
     assert result.stderr.count("calibrated from calibration/extrinsic/cam_") == 4
     theirs = tomllib.loads((src / "camera_array.toml").read_text())["cameras"]
     rig = load_rig(out / "rig.yaml")

@@ -451,6 +451,12 @@ def test_the_warm_up_limit_scales_with_the_markers() -> None:
         assert all(np.isfinite(e.offset).all() for e in kf.cone_estimates(kf.x, P, 0.0, (), warming=False))
         P[:3, :3] = np.eye(3) * 0.06**2  # beyond the limit after the warm-up too: the cameras', not the warm-up's
         assert {e.withheld for e in kf.cone_estimates(kf.x, P, 0.0, (), warming=True)} == {WITHHELD_SIGMA}
+    kf = TopsideFilter(camera_rig())  # σ with the clocks' share / without, mm: who is named, warming or not
+    for sd, timed, warming, why in ((40, 10, True, WITHHELD_WARMING), (60, 30, True, WITHHELD_CLOCKS),
+                                    (60, 30, False, WITHHELD_CLOCKS), (60, 55, True, WITHHELD_SIGMA),
+                                    (20, 10, True, "")):
+        limit = 0.025 if warming else 0.05
+        assert kf._withheld(0.0, [sd / 1e3] * 3, [timed / 1e3] * 3, limit, False, False, warming) == why
 
 
 def test_a_long_run_is_smoothed_piece_by_piece() -> None:

@@ -67,7 +67,8 @@ def calibrate(
                                  subpix_window=subpix_window, progress=lambda: progress.advance(task),
                                  inverted=inverted)
     _print_calibration(result, len(images), fix_aspect)
-    save_camera(out, result.camera, extra={"nframes": len(result.per_view_rms), "flags": result.flags})
+    save_camera(out, result.camera, extra={"nframes": len(result.per_view_rms), "flags": result.flags,
+                                           "fit_reprojection_error": result.rms, "board_coverage": result.coverage})
     console.print(f"wrote {out}")
 
 
@@ -85,8 +86,10 @@ def _print_calibration(result: CalibrationResult, n_images: int, fix_aspect: boo
     std = dict(result.std_intrinsics)
     if fix_aspect and "fy" in std:  # OpenCV reports 0 for fx, which it derives from fy at the fixed aspect
         std["fx"] = std["fy"] * K[0, 0] / K[1, 1]
-    console.print(f"views used: {len(result.per_view_rms)}" + (f" of {n_images}" if n_images >= len(result.per_view_rms)
-                                                               else f" from {n_images} file{'s' * (n_images > 1)}"))
+    frames = sum("#" in name for name in result.per_view_rms)
+    photos = len(result.per_view_rms) - frames
+    console.print(f"views used: {len(result.per_view_rms)} ({photos} photo{'s' * (photos != 1)}, {frames} video "
+                  f"frame{'s' * (frames != 1)}) from {n_images} file{'s' * (n_images != 1)}")
     console.print(f"total RMS reprojection error: {result.rms:.4f} px")
     values = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}
     values.update({n: d[i] for i, n in enumerate(calib.INTRINSIC_NAMES[4:4 + d.size])})

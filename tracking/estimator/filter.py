@@ -346,10 +346,11 @@ class TopsideFilter(FilterState):
         if below_cones(dz, sd[2]):  # no set-down can be there
             self.below = (self.below[0] + 1, min(self.below[1], dz))
             return WITHHELD_BELOW
+        hard = REPORT_MAX_SIGMA_M if warming else limit  # what the cameras and clocks are judged by; the warm-up's
+        if max(sd) > hard:  # tighter limit only says the filter is new
+            return WITHHELD_CLOCKS if max(timed_sd) <= hard else WITHHELD_SIGMA
         if max(sd) > limit:
-            if max(timed_sd) <= limit:
-                return WITHHELD_CLOCKS
-            return WITHHELD_WARMING if warming and max(sd) <= REPORT_MAX_SIGMA_M else WITHHELD_SIGMA
+            return WITHHELD_WARMING
         return WITHHELD_COMPARING if comparing else ""
 
 
