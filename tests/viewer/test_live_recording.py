@@ -104,6 +104,10 @@ def test_cone_states() -> None:
     assert no_data_reason(warming, short=True) == "warming up"  # not "σ too large": it would be shown in a second
     assert "first 4 s" in cone_markdown(warming) and "(σ Δx 30 · Δy 20 · Δz 10 mm)" in cone_markdown(warming)
     assert viewer_safe(cone_markdown(warming))
+    older = cone_reading(dataclasses.replace(estimate([np.nan] * 3), covariance=np.diag([0.03, 0.02, 0.01]) ** 2,
+                                             withheld="σ too large"), "A", 10.1, 10.05)  # a recording from before
+    # 'warming up': its warm-up rows say σ too large at a σ within 50 mm
+    assert "first 4 s" in cone_markdown(older) and "1σ above" not in cone_markdown(older)
     wrong = cone_reading(dataclasses.replace(estimate([np.nan] * 3), withheld=WITHHELD_SCALE), "A", 10.1, 10.05)
     assert no_data_reason(wrong, short=True) == "rig error: marker size" and "topside check" in cone_markdown(wrong)
     assert viewer_safe(cone_markdown(wrong))
