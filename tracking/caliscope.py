@@ -370,7 +370,8 @@ def calibrate_camera(folder: Path, video: Path, number: int, board: Board
     intrinsic = _video(folder / "calibration" / "intrinsic", number)
     why = []
     for path in ([intrinsic] if intrinsic is not None else []) + [video]:
-        where = path.relative_to(folder) if path.is_relative_to(folder) else path
+        path, root = path.resolve(), folder.resolve()
+        where = path.relative_to(root) if path.is_relative_to(root) else path
         try:
             result = calibrate([path], board.spec(), inverted=board.inverted)
         except InputError as exc:
