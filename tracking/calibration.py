@@ -34,6 +34,8 @@ SAME_POSE_SHARE = 0.005
 MIN_SHARED_CORNERS = 4  # fewer shared corners (ChArUco views of different parts of the board): distinct views
 VIDEO_VIEWS = 40  # views taken from one video at most: calibrateCamera's cost grows with them, and 40 poses spread
 # over a video pin a pinhole and five distortion terms (OpenCV's samples use 10-25 photos)
+OUTLIER_VIEW_FACTOR = 3.0  # a video frame's view whose RMS exceeds this many times the median view's is dropped and the
+# camera fitted again: a blurred or misread frame (a board's mirrored back) no one can take out of a video by hand
 VIDEO_SCAN_HZ = 10.0  # a video's frames searched for the board at most this often: a board moved by hand changes
 # little in 0.1 s, and a 5-minute video at 30 fps is searched in 3000 frames, not 9000 (caliscope's 6 fps: every frame)
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
@@ -218,6 +220,8 @@ class CalibrationResult:
     rvecs: list[np.ndarray] = field(default_factory=list)
     tvecs: list[np.ndarray] = field(default_factory=list)
     repeated: dict[str, str] = field(default_factory=dict)  # view -> the earlier view whose board pose it repeats
+    dropped: dict[str, float] = field(default_factory=dict)  # video frame's view -> its RMS in the first fit, px, where
+    # that was beyond OUTLIER_VIEW_FACTOR × the median and the camera was fitted again without it
 
 
 def board_coverage(views: Sequence[BoardView], size: tuple[int, int]) -> float:
@@ -299,8 +303,19 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
         K0 = np.eye(3)
     if rational:
         flags |= cv2.CALIB_RATIONAL_MODEL
-    rms, K, dist, rvecs, tvecs, std_intr, _std_extr, per_view = cv2.calibrateCameraExtended(
-        [v.object_points for v in views], [v.image_points for v in views], size, K0, None, flags=flags)
+    def fit(views: list[BoardView]) -> tuple:
+        return cv2.calibrateCameraExtended([v.object_points for v in views], [v.image_points for v in views], size,
+                                           None if K0 is None else K0.copy(), None, flags=flags)
+
+    rms, K, dist, rvecs, tvecs, std_intr, _std_extr, per_view = fit(views)
+    errors = per_view.reshape(-1)
+    outliers = [k for k, v in enumerate(views) if v.frame is not None and errors[k] > OUTLIER_VIEW_FACTOR *
+                np.median(errors)]
+    kept = [v for k, v in enumerate(views) if k not in outliers]
+    dropped = {views[k].name: float(errors[k]) for k in outliers} if len(distinct_poses(kept)) >= MIN_VIEWS else {}
+    if dropped:
+        views, poses = kept, distinct_poses(kept)
+        rms, K, dist, rvecs, tvecs, std_intr, _std_extr, per_view = fit(views)
     std = std_intr.reshape(-1)
     std_named = {name: float(std[i]) for i, name in enumerate(INTRINSIC_NAMES[: 4 + dist.size])}
     coverage = board_coverage(views, size)
@@ -311,7 +326,8 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
         per_view_rms={v.name: float(e) for v, e in zip(views, per_view.reshape(-1), strict=True)},
         std_intrinsics=std_named, missed=missed, coverage=coverage, flags=flags,
         rvecs=list(rvecs), tvecs=list(tvecs),
-        repeated={views[k].name: views[group[0]].name for group in poses for k in group[1:]})
+        repeated={views[k].name: views[group[0]].name for group in poses for k in group[1:]},
+        dropped=dropped)
 
 
 def view_distance(a: BoardView, b: BoardView) -> float:

@@ -130,3 +130,36 @@ def test_a_video_of_a_board_held_still_is_refused_as_one_pose(tmp_path: Path) ->
         out.mux(stream.encode())
     with pytest.raises(InputError, match=r"the board is in 1 view but at only 1 distinct pose.*while filming"):
         calibrate([video], parse_board("chessboard:9x6:0.025"))
+
+
+def test_a_video_frame_far_off_the_others_is_left_out_and_the_camera_fitted_again(tmp_path: Path) -> None:
+    """A chessboard filmed at eight poses (a real H.264 encode, nearly lossless), one frame of them warped by a ripple
+    no lens makes (a misread frame): that frame is dropped, named with its RMS, and the fit is left at the others'."""
+    import av
+    import cv2
+
+    square, K = 30, np.array([[700.0, 0, 320], [0, 700.0, 240], [0, 0, 1]])
+    flat = np.kron((np.indices((7, 10)).sum(axis=0) % 2) * 255, np.ones((square, square))).astype(np.uint8)
+    flat = cv2.copyMakeBorder(flat, square, square, square, square, cv2.BORDER_CONSTANT, value=255)
+    h, w = flat.shape
+    video = tmp_path / "board.mp4"
+    with av.open(str(video), "w") as out:
+        stream = out.add_stream("libx264", rate=5, options={"crf": "2"})
+        stream.width, stream.height, stream.pix_fmt = 640, 480, "yuv420p"
+        for k in range(8):
+            tilt = np.radians([(-1) ** k * 25, (k - 4) * 6, k * 4])
+            R, _ = cv2.Rodrigues(tilt)
+            corners = np.array([[0, 0, 0], [w, 0, 0], [w, h, 0], [0, h, 0]], float) - [w / 2, h / 2, 0]
+            image = (K @ (R @ (corners * 0.0012).T + [[0], [0], [0.75]])).T
+            H = cv2.getPerspectiveTransform(np.float32([[0, 0], [w, 0], [w, h], [0, h]]),
+                                            np.float32(image[:, :2] / image[:, 2:]))
+            picture = cv2.warpPerspective(flat, H, (640, 480), borderValue=255)
+            if k == 5:  # the misread frame: a ripple of 4 px across the picture
+                ys, xs = np.mgrid[0:480, 0:640].astype(np.float32)
+                picture = cv2.remap(picture, xs + 4 * np.sin(ys / 25), ys, cv2.INTER_LINEAR, borderValue=255)
+            frame = av.VideoFrame.from_ndarray(np.dstack([picture] * 3), format="rgb24")
+            out.mux(stream.encode(frame))
+        out.mux(stream.encode())
+    r = calibrate([video], parse_board("chessboard:9x6:0.03"))
+    assert list(r.dropped) == ["board.mp4#5"] and r.dropped["board.mp4#5"] > 3 * r.rms
+    assert "board.mp4#5" not in r.per_view_rms and len(r.per_view_rms) == 7 and r.rms < 0.3
