@@ -100,7 +100,8 @@ def _print_calibration(result: CalibrationResult, n_images: int, fix_aspect: boo
     if result.missed:
         console.print(f"no board found in {len(result.missed)}: {', '.join(result.missed)}", style="yellow")
     if result.dropped:
-        worst = ", ".join(f"{name} {rms:.2f} px" for name, rms in sorted(result.dropped.items(), key=lambda i: -i[1])[:5])
+        by_rms = sorted(result.dropped.items(), key=lambda item: -item[1])[:5]
+        worst = ", ".join(f"{name} {rms:.2f} px" for name, rms in by_rms)
         warn_lines([f"{len(result.dropped)} video frame{'s' * (len(result.dropped) > 1)} left out, far off the other "
                     f"views (blurred or misread; the camera fitted again without them): {worst}"])
     for photo, first in result.repeated.items():
