@@ -332,7 +332,8 @@ def read_session(folder: Path, videos: Path | None = None) -> Session:
             left_out.append(f"{name}: no rows in {times_path.name if times_path else 'its video'}")
         elif table.get("matrix") is None or table.get("distortions") is None:
             result, said = calibrate_camera(folder, video, number, board)
-            lacking = f"no intrinsics in {source.name}" if source.is_file() else "no camera_array.toml or config.toml"
+            lacking = f"no intrinsics in {source.name}" if source.is_file() else \
+                "no intrinsics (no camera_array.toml, nor camera tables in a config.toml)"
             if result is None:
                 left_out.append(f"{name}: {lacking}, and {said}")
             else:
