@@ -34,8 +34,9 @@ SAME_POSE_SHARE = 0.005
 MIN_SHARED_CORNERS = 4  # fewer shared corners (ChArUco views of different parts of the board): distinct views
 VIDEO_VIEWS = 40  # views taken from one video at most: calibrateCamera's cost grows with them, and 40 poses spread
 # over a video pin a pinhole and five distortion terms (OpenCV's samples use 10-25 photos)
-OUTLIER_VIEW_FACTOR = 3.0  # a video frame's view whose RMS exceeds this many times the median view's is dropped and the
-# camera fitted again: a blurred or misread frame (a board's mirrored back) no one can take out of a video by hand
+OUTLIER_VIEW_FACTOR = 3.0  # a video frame's view whose RMS exceeds this many times the median view's, and the median
+OUTLIER_VIEW_MARGIN_PX = 0.25  # by this much (a steep view of clean footage, 0.16 px at a 0.05 px median, is no
+# outlier), is dropped and the camera fitted again: a blurred or misread frame no one can take out of a video by hand
 VIDEO_SCAN_HZ = 10.0  # a video's frames searched for the board at most this often: a board moved by hand changes
 # little in 0.1 s, and a 5-minute video at 30 fps is searched in 3000 frames, not 9000 (caliscope's 6 fps: every frame)
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
@@ -220,8 +221,9 @@ class CalibrationResult:
     rvecs: list[np.ndarray] = field(default_factory=list)
     tvecs: list[np.ndarray] = field(default_factory=list)
     repeated: dict[str, str] = field(default_factory=dict)  # view -> the earlier view whose board pose it repeats
-    dropped: dict[str, float] = field(default_factory=dict)  # video frame's view -> its RMS in the first fit, px, where
-    # that was beyond OUTLIER_VIEW_FACTOR × the median and the camera was fitted again without it
+    far_off: dict[str, float] = field(default_factory=dict)  # video frame's view -> its RMS in the first fit, px, where
+    # that was far beyond the median view's (OUTLIER_VIEW_FACTOR, OUTLIER_VIEW_MARGIN_PX)
+    refitted: bool = False  # the camera fitted again without them (else too few poses would have remained)
 
 
 def board_coverage(views: Sequence[BoardView], size: tuple[int, int]) -> float:
@@ -309,13 +311,17 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
 
     rms, K, dist, rvecs, tvecs, std_intr, _std_extr, per_view = fit(views)
     errors = per_view.reshape(-1)
-    outliers = [k for k, v in enumerate(views) if v.frame is not None and errors[k] > OUTLIER_VIEW_FACTOR *
-                np.median(errors)]
-    kept = [v for k, v in enumerate(views) if k not in outliers]
-    dropped = {views[k].name: float(errors[k]) for k in outliers} if len(distinct_poses(kept)) >= MIN_VIEWS else {}
-    if dropped:
-        views, poses = kept, distinct_poses(kept)
-        rms, K, dist, rvecs, tvecs, std_intr, _std_extr, per_view = fit(views)
+    median = float(np.median(errors))
+    bound = max(OUTLIER_VIEW_FACTOR * median, median + OUTLIER_VIEW_MARGIN_PX)
+    far = {k: float(errors[k]) for k, v in enumerate(views) if v.frame is not None and errors[k] > bound}
+    far_off = {views[k].name: e for k, e in far.items()}
+    refitted = False
+    if far:
+        kept = [v for k, v in enumerate(views) if k not in far]
+        kept_poses = distinct_poses(kept)
+        if len(kept_poses) >= MIN_VIEWS:  # else kept, and said: without them too few poses remain
+            views, poses, refitted = kept, kept_poses, True
+            rms, K, dist, rvecs, tvecs, std_intr, _std_extr, per_view = fit(views)
     std = std_intr.reshape(-1)
     std_named = {name: float(std[i]) for i, name in enumerate(INTRINSIC_NAMES[: 4 + dist.size])}
     coverage = board_coverage(views, size)
@@ -327,7 +333,7 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
         std_intrinsics=std_named, missed=missed, coverage=coverage, flags=flags,
         rvecs=list(rvecs), tvecs=list(tvecs),
         repeated={views[k].name: views[group[0]].name for group in poses for k in group[1:]},
-        dropped=dropped)
+        far_off=far_off, refitted=refitted)
 
 
 def view_distance(a: BoardView, b: BoardView) -> float:

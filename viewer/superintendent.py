@@ -159,7 +159,7 @@ def no_data_reason(reading: ConeReading, stale_s: float = STALE_S, short: bool =
     figures = f" (σ {sigma_text(sigma)})" if np.isfinite(sigma).all() else ""
     warm = np.isfinite(sigma).all() and (sigma <= REPORT_MAX_SIGMA_M).all() and reading.withheld == WITHHELD_SIGMA
     if reading.withheld == WITHHELD_WARMING or (warm and not short):  # (a recording made before 'warming up' was
-        # said: its warm-up rows say σ too large at a σ within 50 mm)
+        # said: its warm-up rows say σ too large at a σ within 50 mm; the ring's short label keeps what was recorded)
         return WITHHELD_WARMING if short else (
             f"warming up: for the first {REPORT_WARMUP_S:g} s after the topside is placed a cone is shown only with "
             f"σ below {REPORT_WARMUP_SIGMA_SIDES:.1%} of a marker side, {REPORT_WARMUP_SIGMA_SIDES * 1e3:.0f} mm for "

@@ -161,5 +161,5 @@ def test_a_video_frame_far_off_the_others_is_left_out_and_the_camera_fitted_agai
             out.mux(stream.encode(frame))
         out.mux(stream.encode())
     r = calibrate([video], parse_board("chessboard:9x6:0.03"))
-    assert list(r.dropped) == ["board.mp4#5"] and r.dropped["board.mp4#5"] > 3 * r.rms
+    assert list(r.far_off) == ["board.mp4#5"] and r.far_off["board.mp4#5"] > 3 * r.rms and r.refitted
     assert "board.mp4#5" not in r.per_view_rms and len(r.per_view_rms) == 7 and r.rms < 0.3

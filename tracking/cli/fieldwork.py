@@ -99,11 +99,13 @@ def _print_calibration(result: CalibrationResult, n_images: int, fix_aspect: boo
                                                          " (σ not estimated)"))
     if result.missed:
         console.print(f"no board found in {len(result.missed)}: {', '.join(result.missed)}", style="yellow")
-    if result.dropped:
-        by_rms = sorted(result.dropped.items(), key=lambda item: -item[1])[:5]
+    if result.far_off:
+        by_rms = sorted(result.far_off.items(), key=lambda item: -item[1])[:5]
         worst = ", ".join(f"{name} {rms:.2f} px" for name, rms in by_rms)
-        warn_lines([f"{len(result.dropped)} video frame{'s' * (len(result.dropped) > 1)} left out, far off the other "
-                    f"views (blurred or misread; the camera fitted again without them): {worst}"])
+        n = len(result.far_off)
+        done = ("left out, the camera fitted again without them" if result.refitted else
+                "kept: without them too few distinct poses would remain (film more of the board)")
+        warn_lines([f"{n} video frame{'s' * (n > 1)} far off the other views (blurred or misread), {done}: {worst}"])
     for photo, first in result.repeated.items():
         warn_lines([f"{photo}: the board where {first} has it (the same pose: the view adds nothing)"])
     if result.coverage < calib.COVERAGE_WARN:
