@@ -282,3 +282,16 @@ def test_a_session_without_intrinsics_calibrates_each_camera_from_its_own_video(
     for k, c in enumerate(rig.cameras):
         camera = load_camera(rig.resolve(c.calibration))
         assert camera.K[0, 0] == pytest.approx(theirs[str(k)]["matrix"][0][0], rel=0.04) and camera.rms == 0.5
+
+
+def test_a_camera_calibrated_from_its_video_is_named_relative_to_its_session(caliscope: Path, tmp_path: Path) -> None:
+    """A video reached another way than its session (a rig elsewhere names it through '..' and a link): it is named
+    as the session holds it, not by the path it was reached through."""
+    from tracking.caliscope import calibrate_camera, session_board
+
+    session = caliscope / "post_optimization"
+    (tmp_path / "x").mkdir()
+    (tmp_path / "link").symlink_to(session, target_is_directory=True)
+    video = tmp_path / "x" / ".." / "link" / "calibration" / "extrinsic" / "cam_1.mp4"
+    result, said = calibrate_camera(session, video, 1, session_board(session))
+    assert result is not None and said.startswith("calibrated from calibration/extrinsic/cam_1.mp4 (")
