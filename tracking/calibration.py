@@ -107,7 +107,7 @@ class BoardView:
 def find_chessboard(gray: np.ndarray, board: BoardSpec, window: int = SUBPIX_WINDOW, fast: bool = False
                     ) -> tuple[np.ndarray, np.ndarray] | None:
     """Chessboard inner corners refined to sub-pixel, or None when the board is not found (fast: a quick look first,
-    for a video's frames, most of which may not show it: 19 against 112 ms a 720p frame without the board)."""
+    for a video's frames, most of which may not show it: 20 against 114 ms a 720p frame without the board)."""
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | (cv2.CALIB_CB_FAST_CHECK if fast else 0)
     found, corners = cv2.findChessboardCorners(gray, (board.cols, board.rows), flags=flags)
     if not found:
@@ -147,10 +147,10 @@ def find_board(path: Path, board: BoardSpec, window: int = SUBPIX_WINDOW, invert
 
 
 def video_views(path: Path, board: BoardSpec, window: int = SUBPIX_WINDOW, inverted: bool = False
-                ) -> tuple[list[BoardView], int, tuple[int, int] | None]:
+                ) -> tuple[list[BoardView], tuple[int, int] | None]:
     """A video's views of the board, at most VIDEO_VIEWS spread over its poses (spread_views), from frames at most
-    VIDEO_SCAN_HZ apart; how many frames showed it; its pictures' size (w, h), None when it has no frame. A picture of
-    another size than the first is an error."""
+    VIDEO_SCAN_HZ apart; its pictures' size (w, h), None when it has no frame. A picture of another size than the
+    first is an error."""
     views: list[BoardView] = []
     size: tuple[int, int] | None = None
     last = -np.inf
@@ -165,38 +165,39 @@ def video_views(path: Path, board: BoardSpec, window: int = SUBPIX_WINDOW, inver
         size = frame_size
         if view is not None:
             views.append(view)
-    return spread_views(views, VIDEO_VIEWS), len(views), size
+    return spread_views(views, VIDEO_VIEWS), size
 
 
-def _dense(views: Sequence[BoardView]) -> tuple[np.ndarray, np.ndarray]:
-    """(V, C, 2) the views' image points by board point (NaN where a view lacks it, C board points seen in any) and
-    (V,) each view's board extent in the image (its bounding box's diagonal), as view_distance measures them."""
+def pose_distances(views: Sequence[BoardView]) -> Callable[[int], np.ndarray]:
+    """How far each view's board lies from view k's in the image, (V,) for a k: the mean distance of their shared
+    corners (matched by board point) over the board's extent in the image (its bounding box's diagonal), the smaller
+    of the two views' shares; inf where they share fewer than MIN_SHARED_CORNERS (different parts of a ChArUco
+    board). Vectorised over the views (9000 frames' views against one in milliseconds)."""
     index: dict[tuple[float, ...], int] = {}
     keys = [[index.setdefault(tuple(np.round(p, 6)), len(index)) for p in v.object_points] for v in views]
-    points = np.full((len(views), len(index), 2), np.nan)
+    points = np.full((len(views), len(index), 2), np.nan)  # (V, C, 2) NaN where a view lacks a board point
     for k, (v, columns) in enumerate(zip(views, keys, strict=True)):
         points[k, columns] = v.image_points
-    extent = np.array([np.linalg.norm(np.ptp(v.image_points, axis=0)) for v in views])
-    return points, np.maximum(extent, 1e-9)
+    extent = np.maximum([np.linalg.norm(np.ptp(v.image_points, axis=0)) for v in views], 1e-9)  # (V,)
+    seen = np.isfinite(points[:, :, 0])
+
+    def distances(k: int) -> np.ndarray:
+        shared = seen & seen[k]
+        count = shared.sum(axis=1)
+        mean = np.where(shared, np.linalg.norm(points - points[k], axis=2), 0.0).sum(axis=1) / np.maximum(count, 1)
+        return np.where(count >= MIN_SHARED_CORNERS, np.minimum(mean / extent[k], mean / extent), np.inf)
+
+    return distances
 
 
 def spread_views(views: Sequence[BoardView], most: int) -> list[BoardView]:
     """At most `most` of the views, far apart: the one with the most corners first, then each time the one farthest
-    from those taken (view_distance either way, the smaller, to the nearest taken), until none lies SAME_POSE_SHARE
-    or more from them; in their order. Vectorised over the views: 40 of 9000 frames' views in seconds."""
+    from those taken (pose_distances, to the nearest taken), until none lies SAME_POSE_SHARE or more from them; in
+    their order."""
     if not views:
         return []
-    points, extent = _dense(views)
-    seen = np.isfinite(points[:, :, 0])
-
-    def distances(k: int) -> np.ndarray:  # (V,) from view k to every view, the smaller of both directions
-        shared = seen & seen[k]
-        moved = np.where(shared, np.linalg.norm(points - points[k], axis=2), 0.0).sum(axis=1)
-        mean = moved / np.maximum(shared.sum(axis=1), 1)
-        d = np.minimum(mean / extent[k], mean / extent)
-        return np.where(shared.sum(axis=1) >= MIN_SHARED_CORNERS, d, np.inf)
-
-    taken = [int(np.argmax(seen.sum(axis=1)))]
+    distances = pose_distances(views)
+    taken = [max(range(len(views)), key=lambda k: len(views[k].image_points))]
     nearest = distances(taken[0])
     while len(taken) < most:
         k = int(np.argmax(nearest))
@@ -224,6 +225,7 @@ class CalibrationResult:
     far_off: dict[str, float] = field(default_factory=dict)  # video frame's view -> its RMS in the first fit, px, where
     # that was far beyond the median view's (OUTLIER_VIEW_FACTOR, OUTLIER_VIEW_MARGIN_PX)
     refitted: bool = False  # the camera fitted again without them (else too few poses would have remained)
+    video_frames: int = 0  # of the views used, those from videos (the rest photos)
 
 
 def board_coverage(views: Sequence[BoardView], size: tuple[int, int]) -> float:
@@ -249,7 +251,7 @@ def board_views(paths: Sequence[Path], board: BoardSpec, subpix_window: int = SU
             view, view_size = find_board(path, board, subpix_window, inverted)
             found = [view] if view is not None else []
         else:
-            found, _, video_size = video_views(path, board, subpix_window, inverted)
+            found, video_size = video_views(path, board, subpix_window, inverted)
             if video_size is None:
                 raise InputError(path, "video has no frame (expected a video of the board)")
             view_size = video_size
@@ -333,29 +335,22 @@ def calibrate(paths: Sequence[Path], board: BoardSpec, fix_aspect: bool = False,
         std_intrinsics=std_named, missed=missed, coverage=coverage, flags=flags,
         rvecs=list(rvecs), tvecs=list(tvecs),
         repeated={views[k].name: views[group[0]].name for group in poses for k in group[1:]},
-        far_off=far_off, refitted=refitted)
-
-
-def view_distance(a: BoardView, b: BoardView) -> float:
-    """How far b's board lies from a's in the image: the mean distance of their shared corners (matched by board
-    point) as a share of a's board extent (its bounding box's diagonal); inf when they share too few corners."""
-    index = {tuple(np.round(p, 6)): i for i, p in enumerate(a.object_points)}
-    pairs = [(index[key], j) for j, p in enumerate(b.object_points) if (key := tuple(np.round(p, 6))) in index]
-    if len(pairs) < MIN_SHARED_CORNERS:
-        return float("inf")
-    ia, ib = np.array(pairs).T
-    extent = float(np.linalg.norm(np.ptp(a.image_points, axis=0)))
-    return float(np.mean(np.linalg.norm(a.image_points[ia] - b.image_points[ib], axis=1))) / max(extent, 1e-9)
+        far_off=far_off, refitted=refitted, video_frames=sum(v.frame is not None for v in views))
 
 
 def distinct_poses(views: Sequence[BoardView]) -> list[list[int]]:
     """The views grouped by board pose, in order: each group a first view and the views within SAME_POSE_SHARE of it
-    (photos re-taken, or the same photo given twice)."""
+    (pose_distances: photos re-taken, or the same photo given twice)."""
+    if not views:
+        return []
+    distances = pose_distances(views)
     groups: list[list[int]] = []
-    for k, view in enumerate(views):
-        same = next((g for g in groups if view_distance(views[g[0]], view) < SAME_POSE_SHARE), None)
+    firsts: list[np.ndarray] = []  # each group's first view's distances to every view
+    for k in range(len(views)):
+        same = next((g for g, d in zip(groups, firsts, strict=True) if d[k] < SAME_POSE_SHARE), None)
         if same is None:
             groups.append([k])
+            firsts.append(distances(k))
         else:
             same.append(k)
     return groups

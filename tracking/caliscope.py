@@ -206,12 +206,13 @@ def _camera_tables(folder: Path, videos: Path) -> tuple[Path, dict[int, dict[str
     """The cameras' tables by number, from camera_array.toml or config.toml; without either (or with no camera table
     in config.toml), an empty table for every camera whose video is in videos (to be calibrated from it)."""
     array, config = folder / "camera_array.toml", folder / "config.toml"
+    settings = _toml(config) if config.is_file() and not array.is_file() else {}
     if array.is_file():
         cameras = _toml(array).get("cameras", {})
         path, tables = array, [(str(t.get("cam_id", k)), k, t) for k, t in
                                (cameras.items() if isinstance(cameras, dict) else []) if isinstance(t, dict)]
-    elif config.is_file() and any(k.startswith("cam_") for k in _toml(config)):
-        path, tables = config, [(str(t.get("port", k.removeprefix("cam_"))), k, t) for k, t in _toml(config).items()
+    elif any(k.startswith("cam_") for k in settings):
+        path, tables = config, [(str(t.get("port", k.removeprefix("cam_"))), k, t) for k, t in settings.items()
                                 if k.startswith("cam_") and isinstance(t, dict)]
     else:
         found = sorted({int(m) for n in VIDEO_NAMES for v in videos.glob(n.format("*"))
@@ -370,8 +371,9 @@ def calibrate_camera(folder: Path, video: Path, number: int, board: Board
     video of it shows the board enough."""
     intrinsic = _video(folder / "calibration" / "intrinsic", number)
     why = []
+    root = folder.resolve()
     for path in ([intrinsic] if intrinsic is not None else []) + [video]:
-        path, root = path.resolve(), folder.resolve()
+        path = path.resolve()
         where = path.relative_to(root) if path.is_relative_to(root) else path
         try:
             result = calibrate([path], board.spec(), inverted=board.inverted)

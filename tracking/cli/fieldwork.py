@@ -86,7 +86,7 @@ def _print_calibration(result: CalibrationResult, n_images: int, fix_aspect: boo
     std = dict(result.std_intrinsics)
     if fix_aspect and "fy" in std:  # OpenCV reports 0 for fx, which it derives from fy at the fixed aspect
         std["fx"] = std["fy"] * K[0, 0] / K[1, 1]
-    frames = sum("#" in name for name in result.per_view_rms)
+    frames = result.video_frames
     photos = len(result.per_view_rms) - frames
     console.print(f"views used: {len(result.per_view_rms)} ({photos} photo{'s' * (photos != 1)}, {frames} video "
                   f"frame{'s' * (frames != 1)}) from {n_images} file{'s' * (n_images != 1)}")
