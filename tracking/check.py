@@ -468,8 +468,9 @@ def lens_reason(lens: dict[str, np.ndarray], calibrations: dict[str, CameraModel
     model = calibrations[camera]
     states = "states no error, taken as" if model.rms is None else "states"
     return (f"; {camera}'s calibration {states} {model.model_px:.2f} px RMS error, which alone leaves "
-            f"σ {float(sigma.max()) * 1000:.0f} mm in the estimate, across its line of sight (no number of frames "
-            "averages it away): a better calibration, a longer lens or a second camera would lower it")
+            f"σ {float(sigma.max()) * 1000:.0f} mm in the estimate (across its line of sight, and along it as the "
+            "markers' size reads their depth; no number of frames averages it away): a better calibration, a longer "
+            "lens or a second camera at an angle would lower it")
 
 
 def unstated_errors(rig: Rig, runs: dict[str, CameraRun]) -> list[str]:

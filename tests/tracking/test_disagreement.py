@@ -9,6 +9,7 @@ import pytest
 
 from tracking.estimator.disagreement import DISAGREEMENT_WAIT_S, LENS_SHARE, Disagreement, lens_sigmas
 from tracking.estimator.state import STATE, point_offset_matrix
+from tracking.geometry import inverse
 from tracking.offsets import BodyObservation
 from tracking.pose import BodyPose, Choice
 
@@ -153,19 +154,22 @@ def test_a_frames_residual_is_its_own_offset_at_the_cone_less_the_filters() -> N
     np.testing.assert_allclose(d.moments[("a", "A")].mean, point_offset_matrix(c) @ (own - x[:STATE]), atol=1e-9)
 
 
-def test_a_calibrations_stated_error_floors_the_cone_across_the_line_of_sight() -> None:
-    """A camera alone whose calibration misses by 0.5 px (its RMS), 20 m from its markers at f 2000 px, cone A 5 m
-    off its axis: the two images, each 0.5 px off an axis, apart, put the offset √2 × 5 mm × depth / 20 m off an axis
-    across the line of sight to the cone, nothing along it; two such cameras with equal weight, half that variance;
-    a calibration stating no error, nothing."""
+def test_a_calibrations_stated_error_floors_the_cone_across_and_along_the_line_of_sight() -> None:
+    """A camera alone whose calibration misses by 0.5 px (its RMS), 20 m from its 1 m markers at f 2000 px, cone A
+    5 m off its axis: the two images, each 0.5 px off an axis, apart, put the offset √2 × 5 mm × depth / 20 m off an
+    axis across the line of sight to the cone, and depth / 1 m times that along it (a marker's size, 100 px, read
+    0.7 % off); two such cameras with equal weight, half that variance, and once they are compared (their
+    disagreement then measures what their lenses leave) across alone; a calibration stating no error, nothing."""
     point = np.array([5.0, 0.0, 0.0])  # cone A in the jacket frame; the camera looks along the jacket's z
 
     def off_axis() -> Disagreement:
-        return Disagreement(["A"], point_offset_matrix(point)[None], {"A": [(1, 2)]})
+        return Disagreement(["A"], point_offset_matrix(point)[None], {"A": [(1, 2)]}, side=1.0)
 
     in_camera = point + np.array([0.0, 0.0, 20.0])
     sight = in_camera / np.linalg.norm(in_camera)
-    expected = (LENS_SHARE * 0.5 * in_camera[2] / 2000.0) ** 2 * (1.0 - sight**2)  # s² (I - l lᵀ)'s diagonal
+    s2 = (LENS_SHARE * 0.5 * in_camera[2] / 2000.0) ** 2
+    across = s2 * (1.0 - sight**2)  # s² (I - l lᵀ)'s diagonal
+    expected = across + s2 * (in_camera[2] / 1.0) ** 2 * sight**2  # ... + (s Z / S)² l lᵀ's
     d = off_axis()
     t = 0.0
     for i in range(30):
@@ -179,8 +183,50 @@ def test_a_calibrations_stated_error_floors_the_cone_across_the_line_of_sight() 
     for i in range(30):
         for camera in ("a", "b"):
             keep(pair, view(camera, i / RATE_HZ, np.zeros(3), model_px=0.5), X, P)
+        if i == 1:  # two frames each: not compared yet
+            assert pair.floors(i / RATE_HZ)[0][0] == pytest.approx(expected / 2, rel=0.01)
     floors, _ = pair.floors(29 / RATE_HZ)
-    assert floors[0] == pytest.approx(expected / 2, rel=0.01)
+    assert floors[0] == pytest.approx(across / 2, rel=0.01)
     exact = off_axis()
     keep(exact, view("a", 0.0, np.zeros(3)), X, P)
     assert np.array_equal(exact.floors(0.0)[0], np.zeros((1, 3)))
+
+
+def test_a_second_camera_at_right_angles_carries_the_first_ones_depth() -> None:
+    """Two cameras 20 m from cone A, one looking along the jacket's z and one along its x, their calibrations 0.5 px
+    off: each alone leaves its depth off by 20 times its cross-sight error; fused by their fits' information (each
+    fit's depth 20 times looser, as a marker's size reads it), each axis takes the error of the camera that sees it
+    across, not the other's depth (before they are compared: after, their disagreement measures it)."""
+    along_x = np.eye(4)
+    along_x[:3, :3] = [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]  # the camera's z is the jacket's x
+    along_x[:3, 3] = [0.0, 0.0, 20.0]
+    s2 = (LENS_SHARE * 0.5 * 20.0 / 2000.0) ** 2  # across the line of sight, m²
+    fused = cone()
+    fused.side = 1.0
+    alone = {"a": cone(), "b": cone()}
+    for i in range(2):  # two frames each: not compared yet
+        t = i / RATE_HZ
+        for camera, T in (("a", np.eye(4)), ("b", along_x)):
+            frame = looking(view(camera, t, np.zeros(3), model_px=0.5), T, depth_sd_m=0.01)
+            alone[camera].side = 1.0
+            keep(alone[camera], frame, X, P)
+            keep(fused, frame, X, P)
+    np.testing.assert_allclose(alone["a"].floors(t)[0][0], [s2, s2, 400 * s2], rtol=0.01)  # its depth: the jacket z
+    np.testing.assert_allclose(alone["b"].floors(t)[0][0], [400 * s2, s2, s2], rtol=0.01)
+    floor = fused.floors(t)[0][0]
+    assert floor[0] < 2 * s2 and floor[2] < 2 * s2  # each depth carried by the other's cross-sight
+    assert floor[1] == pytest.approx(s2 / 2, rel=0.05)  # y: across both, equal weights
+
+
+def looking(o: BodyObservation, R_view: np.ndarray, depth_sd_m: float) -> BodyObservation:
+    """The frame o seen by a camera turned by R_view (4, 4: T_camera_jacket's rotation, 20 m off), its fits' position
+    σ along its line of sight depth_sd_m (a marker's size reads depth 20 times looser than it reads the image)."""
+    from dataclasses import replace
+
+    assert o.jacket is not None and o.topside is not None
+    cov = np.diag([1e-8] * 3 + [(0.5 * MM) ** 2 / 2] * 2 + [depth_sd_m**2 / 2])  # in the camera: its z is depth
+    T_cj = R_view.copy()
+    T_cj[:3, 3] = [0.0, 0.0, 20.0]
+    T_jt = inverse(o.jacket.T_camera_body) @ o.topside.T_camera_body
+    return replace(o, jacket=replace(o.jacket, T_camera_body=T_cj, covariance=cov),
+                   topside=replace(o.topside, T_camera_body=T_cj @ T_jt, covariance=cov))

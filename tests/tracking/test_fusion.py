@@ -1046,3 +1046,57 @@ def test_a_corner_misread_all_run_long_widens_its_views_bias_and_no_other() -> N
     err, sigma = errors_and_sigmas(est, 4.0)
     assert np.mean(np.abs(err) < 3 * sigma) > 0.99
     assert np.abs(err).max() < 0.045  # m; 69 mm when the misread went unfound, 39 mm found after half a second
+
+
+def test_a_lone_cameras_calibration_error_floors_its_depth_from_its_first_estimate() -> None:
+    """A board of 4 cm markers (five jacket, five topside, one plane) 0.65 m from one webcam (f 900 px), its
+    calibration stating 0.15 px: from the frame that places the topside on, σ at the cone holds the offset that error
+    gives, √2 × 0.15 px × Z / f across the line of sight and Z / side (16) times that along it (a marker's depth read
+    from its image's size: caliscope's cam_0 alone kept its Δy 2.5 mm off for seconds at σ 0.6 mm, its first
+    estimate 5σ off); an exact calibration leaves σ a fraction of that, the fits' own."""
+    from tests.synthetic import look_at
+
+    side, f = 0.04, 900.0
+    centres = [(x, z) for z in (0.05, 0.1) for x in (-0.1, -0.05, 0.0, 0.05, 0.1)][:5]
+    markers = [{"id": i, "body": "topside", "cone": "A", "face": "astern", "center": [x, 0.0, z]}
+               for i, (x, z) in enumerate(centres)]
+    markers += [{"id": 5 + i, "body": "jacket", "cone": "A", "face": "astern", "center": [x, 0.0, -z]}
+                for i, (x, z) in enumerate(centres)]
+    the_rig = Rig.model_validate({"marker_size": side, "cones": {"A": [0.0, 0.0, 0.0]}, "markers": markers,
+                                  "cameras": [{"name": "cam", "calibration": "cam.yaml", "source": "cam.mp4",
+                                               "mount": "fixed"}]})
+    camera = CameraModel(np.array([[f, 0.0, 640.0], [0.0, f, 360.0], [0.0, 0.0, 1.0]]), np.zeros(5), 1280, 720,
+                         rms=0.15)
+    eye = np.array([0.2, 0.6, 0.1])
+    T_camera_jacket = np.linalg.inv(look_at(eye, np.zeros(3)))
+    rng = np.random.default_rng(0)
+    geometry = body_geometry(the_rig)
+
+    def frame(t: float) -> BodyObservation:
+        poses = {}
+        for m in the_rig.markers:
+            T = T_camera_jacket @ m.T_body_marker
+            pc = (T[:3, :3] @ marker_object_points(side).T).T + T[:3, 3]
+            px = camera.project(pc) + rng.normal(0.0, 0.1, (4, 2))
+            poses[m.id] = estimate_pose(MarkerDetection(m.id, px), camera, side)
+        o = observe_bodies(geometry, poses, camera, "cam", t, side)
+        assert o is not None
+        return o
+
+    obs = [frame(k / 6.0) for k in range(3)]
+    cone = T_camera_jacket[:3, 3]  # the cone (the jacket's origin) in the camera
+    sight = T_camera_jacket[:3, :3].T @ (cone / np.linalg.norm(cone))  # in the jacket frame
+    s2 = (np.sqrt(2.0) * 0.15 * cone[2] / f) ** 2
+    lens = s2 * (np.eye(3) - np.outer(sight, sight)) + s2 * (cone[2] / side) ** 2 * np.outer(sight, sight)
+
+    def first(model_px: float) -> np.ndarray:
+        kf = TopsideFilter(the_rig)
+        for o in obs:
+            kf.predict(o.time, [o])
+            kf.update(dataclasses.replace(o, model_px=model_px))
+            if kf.topside_placed:
+                return np.diag(next(e for e in kf.cone_estimates() if e.cone == "A").covariance)
+        raise AssertionError("the topside was never placed")
+
+    assert np.all(first(0.15) >= 0.99 * np.diag(lens))
+    assert np.sqrt(first(0.0)).max() < 0.5 * np.sqrt(np.diag(lens)).max()

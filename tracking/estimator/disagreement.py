@@ -24,9 +24,14 @@ put the board's halves 5-10σ apart before anything said they disagree; a third 
 
 A camera alone, or cameras not yet compared, show no disagreement, yet each carries its calibration's error: the RMS
 reprojection error the calibration states, or an assumed one where it states none (model_px, CameraModel.model_px).
-Each frame's offsets also carry the variance that error gives them across the camera's line of sight to each cone
-(_lens_at), weighted as the residuals are; a cone's reported variance is at least Σ share² of its cameras' (their
-residuals' weights aged to now), or the disagreement's where that is more.
+Each frame's offsets also carry the covariance that error gives them at each cone (_lens_at): across the camera's
+line of sight, where it shifts the markers' images, and along it, where it scales them (a marker's depth is read from
+its image's size: Z / S times looser). Across, weighted as the residuals are, a cone's variance is at least Σ share² of
+its cameras' (their residuals' weights aged to now). Along, where no two cameras are compared (their disagreement
+then measures what their lenses leave), each camera's through its weight in the estimate by information, W_c =
+(Σ Λ)⁻¹ Λ_c (its frames' offset covariance from its fits, inverted, aged as the residuals): a camera alone gives all
+of its depth error, a second camera at an angle carries the first one's depth by its own cross-sight. Or the
+disagreement's floor where that is more.
 """
 
 from __future__ import annotations
@@ -57,7 +62,12 @@ LENS_SHARE = float(np.sqrt(2.0))  # (no unit) × a calibration's RMS reprojectio
 # of the picture (no number of its frames averages it away). Each marker's image is taken as missed by model_px an
 # axis (the RMS read as each axis's σ, as the corners' noise reads it: measurements._corner_covariance), its two
 # markers' misses apart: √2. OpenCV's RMS is the 2-D miss's length, so that reading is √2 conservative; read per axis
-# (model_px / √2, LENS_SHARE 1), caliscope's post_monocal kept 9.7 % of its Δy errors beyond 3σ in its first seconds
+# (model_px / √2, LENS_SHARE 1), caliscope's post_monocal kept 9.7 % of its Δy errors beyond 3σ in its first seconds.
+# Along the line of sight the same miss scales a marker's image of side S by √2 model_px over its f S / Z pixels: its
+# depth off by Z / S times as much (caliscope's 4_cam_recording, cam_0 alone at 16 sides: Δy 2.5 mm off for seconds
+# at σ 0.6 mm, 54 % of its errors beyond 3σ, when nothing took its depth to be off; 3.1 mm with it)
+INFO_FLOOR_M = 1e-6  # σ added to a frame's offset covariance before it is inverted into information (a fit's
+# covariance is positive definite; this keeps a degenerate one finite)
 DISAGREEMENT_P = 0.95  # the cameras' means must scatter beyond what their noise gives at this probability (χ² over
 # cameras - 1 degrees of freedom) before their spread counts: unbiased cameras must not widen σ by chance
 
@@ -73,15 +83,25 @@ class _Moments:
     w2: float = 0.0  # Σ weights²
     s1: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r
     s2: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r²
-    s_lens: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w lens: its calibration's share, m²
+    s_across: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))  # Σ w L: its calibration's error across
+    s_along: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))  # ... and along its line of sight, m²
+    info: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))  # Σ Λ: its frames' information at the cone
+    w_lens: float = 0.0  # Σ weights of the frames its lens terms hold (the residuals' and the placing frame's)
 
-    def add(self, time: float, r: np.ndarray, weight: float, lens: np.ndarray) -> None:
+    def add(self, time: float, r: np.ndarray, weight: float, lens: tuple[np.ndarray, np.ndarray],
+            info: np.ndarray, counted: bool = True) -> None:
+        """A frame's residual r (3,) of weight 1 / σ², its lens covariances (across, along) and information; not
+        counted: its lens terms alone (the frame that placed the topside, its residual against itself)."""
         k = float(np.exp(-max(0.0, time - self.time) / DISAGREEMENT_TAU_S))
-        self.count = k * self.count + 1.0
+        c = 1.0 if counted else 0.0
+        self.count = k * self.count + c
         self.known = self.known or self.count >= DISAGREEMENT_MIN_FRAMES
-        self.w, self.w2 = k * self.w + weight, k * k * self.w2 + weight * weight
-        self.s1, self.s2 = k * self.s1 + weight * r, k * self.s2 + weight * r * r
-        self.s_lens = k * self.s_lens + weight * lens
+        self.w, self.w2 = k * self.w + c * weight, k * k * self.w2 + c * weight * weight
+        self.s1, self.s2 = k * self.s1 + c * weight * r, k * self.s2 + c * weight * r * r
+        self.w_lens = k * self.w_lens + weight
+        self.s_across = k * self.s_across + weight * lens[0]
+        self.s_along = k * self.s_along + weight * lens[1]
+        self.info = k * self.info + info
         self.time = time
 
     @property
@@ -93,10 +113,10 @@ class _Moments:
     def mean(self) -> np.ndarray:
         return self.s1 / self.w
 
-    @property
-    def lens(self) -> np.ndarray:
-        """(3,) variance its calibration's error gives its offset at the cone, m² (weighted as its residuals)."""
-        return self.s_lens / self.w
+    def lens(self, along: bool = True) -> np.ndarray:
+        """(3, 3) covariance its calibration's error gives its offset at the cone, m² (weighted as its residuals):
+        across its line of sight, and along it too where along."""
+        return (self.s_across + self.s_along if along else self.s_across) / self.w_lens
 
     @property
     def scatter(self) -> np.ndarray:
@@ -112,12 +132,14 @@ class _Moments:
 @dataclass(frozen=True)
 class Residuals:
     """One camera frame's view of the cones: those its two fits show (indices), and its residual (3,), weight (1 /
-    σ²) and the variance (3,) its calibration's error gives there, at each where the filter had an estimate."""
+    σ²), the covariance (3, 3) its calibration's error gives there and its own offset's information (3, 3, the
+    inverse of its fits' covariance there), at each where the filter had an estimate."""
 
     camera: str
     time: float
     seen: list[int]
-    residuals: list[tuple[int, np.ndarray, float, np.ndarray]]
+    residuals: list[tuple[int, np.ndarray, float, tuple[np.ndarray, np.ndarray], np.ndarray]]
+    counted: bool = True  # False: its lens terms alone count (the frame that placed the topside: its own state)
 
 
 @dataclass
@@ -135,27 +157,31 @@ class Disagreement:
     _cache: dict[int, tuple] = field(default_factory=dict)  # cone index -> ((cameras, version), its floor (3,))
     points: np.ndarray = field(init=False)  # (C, 3) the cones' points in the jacket frame (H's [:, 3:6] = -[r]×)
     lensed: bool = False  # a camera's calibration error (model_px) is above 0: until then no cone has a lens floor
+    side: float = 0.0  # the markers' side, m (rig.marker_size): their depth is read from their images' size; 0: the
+    # lens error taken across the line of sight alone
 
     def __post_init__(self) -> None:
         self.points = -np.stack([self.H[:, 2, 4], self.H[:, 0, 5], self.H[:, 1, 3]], axis=1)
 
-    def residuals(self, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None) -> Residuals:
+    def residuals(self, o: BodyObservation, x: np.ndarray | None, P: np.ndarray | None = None,
+                  counted: bool = True) -> Residuals:
         """A camera frame's own offset at each cone whose pair it shows, against the state x's (n,) with covariance P
         before the frame (None: the topside not placed yet, the view only noted); kept by record. A frame whose fit
-        IPPE could not settle gives nothing (its pose may be the wrong one of two)."""
+        IPPE could not settle gives nothing (its pose may be the wrong one of two). Not counted: against the state
+        the frame itself placed, which only its lens terms hold anything of."""
         if o.jacket is None or o.topside is None or Choice.AMBIGUOUS in (o.jacket.choice, o.topside.choice):
             return Residuals(o.camera, o.time, [], [])
         seen = [k for k, cone in enumerate(self.names) if any(j in o.jacket.marker_ids and t in o.topside.marker_ids
                                                               for j, t in self.pairs.get(cone, ()))]
         if not seen or x is None or P is None:
             return Residuals(o.camera, o.time, seen, [])
-        return Residuals(o.camera, o.time, seen, self._posed(o, seen, x, P))
+        return Residuals(o.camera, o.time, seen, self._posed(o, seen, x, P), counted)
 
     def _posed(self, o: BodyObservation, seen: list[int], x: np.ndarray, P: np.ndarray
-               ) -> list[tuple[int, np.ndarray, float, np.ndarray]]:
+               ) -> list[tuple[int, np.ndarray, float, tuple[np.ndarray, np.ndarray], np.ndarray]]:
         """Residuals at the cones from the frame's T_jacket_topside (its two fits), linear in the pose as the
-        filter's offsets are (point_offset_matrix), with their σ² from the fits' covariances (first order), and the
-        variance per axis the camera's calibration error gives there (_lens_at)."""
+        filter's offsets are (point_offset_matrix), with their σ² from the fits' covariances (first order), the
+        covariance the camera's calibration error gives there (_lens_at) and the frame's information there."""
         assert o.jacket is not None and o.topside is not None
         T = inverse(o.jacket.T_camera_body) @ o.topside.T_camera_body
         own = np.zeros(STATE)
@@ -163,14 +189,16 @@ class Disagreement:
         G = relative_pose_jacobian(o.jacket.T_camera_body, o.topside.T_camera_body)  # (6, 12)
         cov = G[:, :6] @ o.jacket.covariance @ G[:, :6].T + G[:, 6:] @ o.topside.covariance @ G[:, 6:].T
         H = self.H[seen]  # (S, 3, 12)
-        fits = np.einsum("sij,jk,sik->s", H[:, :, :6], cov, H[:, :, :6])  # traces: the fits' σ² at each cone
+        C = np.einsum("sij,jk,slk->sil", H[:, :, :6], cov, H[:, :, :6])  # (S, 3, 3) the fits' covariance at each cone
+        fits = np.trace(C, axis1=1, axis2=2)  # their σ²
         filtered = np.einsum("sij,jk,sik->s", H, P[:STATE, :STATE], H)  # and the filter's own
-        lens = _lens_at(o, self.points[seen])  # (S, 3)
+        across, along = _lens_at(o, self.points[seen], self.side)  # (S, 3, 3) each
         self.lensed = self.lensed or o.model_px > 0.0
         residuals = H @ (own - x[:STATE])
-        return [(k, residuals[i], 1.0 / v, lens[i]) for i, (k, v) in enumerate(zip(seen, fits + filtered,
-                                                                                    strict=True))
-                if np.isfinite(v) and v > 1e-18 and np.isfinite(residuals[i]).all()]  # a NaN would stay for good
+        return [(k, residuals[i], 1.0 / v, (across[i], along[i]), np.linalg.inv(C[i] + INFO_FLOOR_M**2 * np.eye(3)))
+                for i, (k, v) in enumerate(zip(seen, fits + filtered, strict=True))
+                if np.isfinite(v) and v > 1e-18 and np.isfinite(residuals[i]).all() and np.isfinite(C[i]).all()]
+        # a NaN would stay for good
 
     def record(self, r: Residuals) -> None:
         """Keep a frame's residuals: the filter used its topside corners (a view it refused makes no estimate)."""
@@ -178,11 +206,11 @@ class Disagreement:
             key = (r.camera, self.names[k])
             self.by_cone.setdefault(k, {})[r.camera] = r.time
             self.first_seen.setdefault(key, r.time)
-        for k, residual, weight, lens in r.residuals:
+        for k, residual, weight, lens, info in r.residuals:
             key = (r.camera, self.names[k])
             if key not in self.moments:
                 self.moments[key] = _Moments(r.time)
-            self.moments[key].add(r.time, residual, weight, lens)
+            self.moments[key].add(r.time, residual, weight, lens, info, r.counted)
             self.versions[k] = self.versions.get(k, 0) + 1
 
     def floors(self, time: float) -> tuple[np.ndarray, np.ndarray]:
@@ -193,15 +221,16 @@ class Disagreement:
         for k, cameras in self.by_cone.items():
             recent = [c for c, t in cameras.items() if time - t <= DISAGREEMENT_WINDOW_S]
             cone = self.names[k]
-            if self.lensed:  # every camera that made the estimate, not only recent ones: its error stays
-                out[k] = _lens([m for c in cameras if (m := self.moments.get((c, cone))) is not None and m.w > 0.0],
-                               time)
+            ms = {c: self.moments.get((c, cone)) for c in recent}
+            compared = {c: m for c, m in ms.items() if m is not None and m.count >= DISAGREEMENT_MIN_FRAMES}
+            if self.lensed:  # every camera that made the estimate, not only recent ones: its error stays; along the
+                # line of sight assumed only where no two cameras are compared (their disagreement measures it)
+                held = [m for c in cameras if (m := self.moments.get((c, cone))) is not None and m.w_lens > 0.0]
+                out[k] = _lens(held, time, along=len(compared) < 2)
             if len(recent) < 2:
                 continue
-            ms = {c: self.moments.get((c, cone)) for c in recent}
             pending[k] = any((m is None or not m.known) and time - self.first_seen[(c, cone)] <= DISAGREEMENT_WAIT_S
                              for c, m in ms.items())  # a camera new to the cone whose noise is not known yet
-            compared = {c: m for c, m in ms.items() if m is not None and m.count >= DISAGREEMENT_MIN_FRAMES}
             key = (tuple(compared), self.versions.get(k, 0))
             if self._cache.get(k, (None,))[0] != key:  # the moments changed since: compare again
                 self._cache[k] = (key, _compared(list(compared.values())))
@@ -211,10 +240,11 @@ class Disagreement:
 
 def lens_sigmas(d: Disagreement, cone: str, time: float) -> dict[str, np.ndarray]:
     """Per camera that has shown a cone's pair, the σ (3,) its calibration's error gives the cone's estimate at
-    a time, m: its own (_lens_at, as its frames weighed it) in its share of the estimate (_lens)."""
-    ms = {c: m for (c, name), m in d.moments.items() if name == cone and m.w > 0.0}
-    shares = _shares(list(ms.values()), time)
-    return {c: share * np.sqrt(m.lens) for (c, m), share in zip(ms.items(), shares, strict=True)}
+    a time, m: its own (_lens_at, as its frames weighed it) through its weight in the estimate (_lens)."""
+    ms = {c: m for (c, name), m in d.moments.items() if name == cone and m.w_lens > 0.0}
+    compared = sum(m.count >= DISAGREEMENT_MIN_FRAMES and time - m.time <= DISAGREEMENT_WINDOW_S for m in ms.values())
+    parts = _lens_parts(list(ms.values()), time, along=compared < 2)
+    return {c: np.sqrt(part) for c, part in zip(ms, parts, strict=True)}
 
 
 def relative_pose_jacobian(T_camera_jacket: np.ndarray, T_camera_topside: np.ndarray) -> np.ndarray:
@@ -238,34 +268,52 @@ def _turn(rvec: np.ndarray) -> np.ndarray:
     return np.stack([turns[:, 2, 1], turns[:, 0, 2], turns[:, 1, 0]])  # rows: φ's axes; columns: δrvec's
 
 
-def _lens_at(o: BodyObservation, points: np.ndarray) -> np.ndarray:
-    """(S, 3) variance per axis, jacket frame, m², of a frame's own offsets at cones at points (S, 3) (jacket frame)
-    that its camera's calibration error gives: across the line of sight to each, at its depth Z,
-    s² (I - l lᵀ) with s = LENS_SHARE × model_px × Z / f (nothing at 0 px, an exact calibration's)."""
+def _lens_at(o: BodyObservation, points: np.ndarray, side: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(S, 3, 3) covariances, jacket frame, m², of a frame's own offsets at cones at points (S, 3) (jacket frame) that
+    its camera's calibration error gives, at each one's depth Z along the unit line of sight l: across the line of
+    sight s² (I - l lᵀ), s = LENS_SHARE × model_px × Z / f, and along it (s Z / side)² l lᵀ for markers of that side
+    (side 0: none; nothing at 0 px, an exact calibration's)."""
     assert o.jacket is not None
     f = float(o.K[0, 0])
     if not (o.model_px > 0.0 and np.isfinite(o.model_px) and f > 0.0):
-        return np.zeros((len(points), 3))
+        return np.zeros((len(points), 3, 3)), np.zeros((len(points), 3, 3))
     T = o.jacket.T_camera_body  # T_camera_jacket
     p = points @ T[:3, :3].T + T[:3, 3]  # (S, 3) the cones in the camera
-    depth = p[:, 2]
+    depth = np.maximum(p[:, 2], 0.0)
     sight = p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-9) @ T[:3, :3]  # (S, 3) in the jacket frame
-    s2 = (LENS_SHARE * o.model_px * np.maximum(depth, 0.0) / f) ** 2
-    return s2[:, None] * (1.0 - sight**2)  # the diagonal of s² (I - l lᵀ)
+    s2 = (LENS_SHARE * o.model_px * depth / f) ** 2
+    along = s2 * (depth / side) ** 2 if side > 0.0 else np.zeros_like(s2)
+    ll = sight[:, :, None] * sight[:, None, :]  # (S, 3, 3) l lᵀ
+    return s2[:, None, None] * (np.eye(3) - ll), along[:, None, None] * ll
 
 
 def _shares(ms: list[_Moments], time: float) -> np.ndarray:
     """(M,) each camera's share of a cone's estimate at a time: its residuals' weight, aged to then."""
-    w = np.array([m.w * np.exp(-max(0.0, time - m.time) / DISAGREEMENT_TAU_S) for m in ms])
+    w = np.array([m.w_lens * np.exp(-max(0.0, time - m.time) / DISAGREEMENT_TAU_S) for m in ms])
     return w / w.sum() if w.sum() > 0.0 else np.zeros(len(ms))
 
 
-def _lens(ms: list[_Moments], time: float) -> np.ndarray:
-    """(3,) variance of a cone's estimate's error its cameras' calibrations give at a time, m²: each camera's in its
-    share of the estimate (_shares), squared; a camera alone gives all of its own."""
+def _lens_parts(ms: list[_Moments], time: float, along: bool = True) -> list[np.ndarray]:
+    """(3,) per camera: the variance its calibration's error gives a cone's estimate at a time, m². Across its line
+    of sight, its own in its share of the estimate (_shares), squared; along it (where along), W L Wᵀ's diagonal with
+    its weight W = (Σ Λ)⁻¹ Λ_c by the cameras' information there (aged to then): a marker's size reads its depth Z / S
+    times looser than its image's place, so another camera's cross-sight, not its share, carries that axis."""
+    if not ms:
+        return []
+    across = [share**2 * np.diagonal(m.lens(along=False)) for share, m in zip(_shares(ms, time), ms, strict=True)]
+    if not along:
+        return across
+    info = [m.info * np.exp(-max(0.0, time - m.time) / DISAGREEMENT_TAU_S) for m in ms]
+    weights = np.linalg.pinv(np.sum(info, axis=0)) @ np.stack(info)  # (M, 3, 3) W_c
+    return [a + np.diagonal(W @ (m.s_along / m.w_lens) @ W.T) for a, W, m in zip(across, weights, ms, strict=True)]
+
+
+def _lens(ms: list[_Moments], time: float, along: bool = True) -> np.ndarray:
+    """(3,) variance of a cone's estimate's error its cameras' calibrations give at a time, m²: the sum of their
+    parts (_lens_parts); a camera alone gives all of its own."""
     if not ms:
         return np.zeros(3)
-    return (_shares(ms, time) ** 2) @ np.array([m.lens for m in ms])
+    return np.sum(_lens_parts(ms, time, along), axis=0)
 
 
 def _compared(ms: list[_Moments]) -> np.ndarray:

@@ -62,7 +62,7 @@ class TopsideFilter(FilterState):
         pairs: dict[str, list[tuple[int, int]]] = {}
         for pair in self.rig.all_pairs():
             pairs.setdefault(pair.cone, []).append((pair.jacket, pair.topside))
-        self.disagreement = Disagreement(*self.cone_rows, pairs)  # the cameras' disagreement at each cone
+        self.disagreement = Disagreement(*self.cone_rows, pairs, side=self.rig.marker_size)  # the cameras' disagreement
 
     def predict(self, time: float, frame: Sequence[Measurement] = ()) -> Transition:
         """Move the state to a capture time and renew the corner biases of the views a frame's body observations will
@@ -145,7 +145,8 @@ class TopsideFilter(FilterState):
         cam = self.cameras.get(o.camera)
         if cam is None:
             return False
-        residuals = self.disagreement.residuals(o, *((self.x, self.P) if self.topside_placed else (None, None)))
+        placed = self.topside_placed
+        residuals = self.disagreement.residuals(o, *((self.x, self.P) if placed else (None, None)))
         self._measure_scale(o)
         cam.corner_noise.add(o.jacket)
         cam.model_px = o.model_px
@@ -158,6 +159,8 @@ class TopsideFilter(FilterState):
                 return False
         if not self.topside_placed and (o.topside is None or not place_topside(self, cam, o.topside)):
             o = replace(o, topside=None, corners={i: c for i, c in o.corners.items() if i in self.jacket_corners})
+        if not placed and self.topside_placed:  # placed by this frame: its calibration's error holds from it on
+            residuals = self.disagreement.residuals(o, self.x, self.P, counted=False)
         jacket = {i: z for i, z in o.corners.items() if i in self.jacket_corners}
         self._measure_motion(cam, o.time, jacket, o.K, o.jacket)
         topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
