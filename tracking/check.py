@@ -55,7 +55,14 @@ from tracking.estimate import WITHHELD_BELOW, ConeEstimate, axes_withheld
 from tracking.estimator import TopsideFilter, cone_points, filter_frame, point_offset_matrix
 from tracking.estimator.disagreement import lens_sigmas
 from tracking.estimator.filter import misread_warning
-from tracking.estimator.noise import MOUNT_MISMATCH, REPORT_MAX_SIGMA_M, STATE, TILT_BASELINE_SIDES, TILT_FLOOR_RAD
+from tracking.estimator.noise import (
+    MOUNT_MISMATCH,
+    REPORT_MAX_SIGMA_M,
+    STATE,
+    TILT_BASELINE_SIDES,
+    TILT_FLOOR_RAD,
+    lens_px,
+)
 from tracking.estimator.state import topside_pose, untold_turn
 from tracking.geometry import skew
 from tracking.images import Frame, VideoHealth
@@ -456,10 +463,12 @@ def depth_reason(e: ConeEstimate, cameras: tuple[str, ...], rig: Rig, cone: str)
 LENS_NOTE_SHARE = 0.5  # a camera's calibration is named when what its error alone leaves is this much of σ
 
 
-def lens_reason(lens: dict[str, np.ndarray], calibrations: dict[str, CameraModel], worst: float) -> str:
+def lens_reason(lens: dict[str, np.ndarray], calibrations: dict[str, CameraModel], worst: float,
+                used: dict[str, float] | None = None) -> str:
     """'; CAM's calibration states ... px ...' when the σ one camera's calibration error (CameraModel.model_px: the
     stated RMS, or UNSTATED_RMS_PX where it states none) alone gives a cone's estimate (lens: camera -> (3,) m, in its
-    share, tracking.estimator.disagreement.lens_sigmas) is LENS_NOTE_SHARE of its worst σ or more, else ''."""
+    share, tracking.estimator.disagreement.lens_sigmas) is LENS_NOTE_SHARE of its worst σ or more, else ''; used:
+    camera -> the model error taken, px, where its own fits of the markers leave more (estimator.noise.lens_px)."""
     if not lens:
         return ""
     camera, sigma = max(lens.items(), key=lambda item: float(item[1].max()))
@@ -467,7 +476,9 @@ def lens_reason(lens: dict[str, np.ndarray], calibrations: dict[str, CameraModel
         return ""
     model = calibrations[camera]
     states = "states no error, taken as" if model.rms is None else "states"
-    return (f"; {camera}'s calibration {states} {model.model_px:.2f} px RMS error, which alone leaves "
+    taken = (used or {}).get(camera, model.model_px)
+    fits = f" and its fits of the markers leave {taken:.2f} px" if taken > model.model_px + 0.005 else ""
+    return (f"; {camera}'s calibration {states} {model.model_px:.2f} px RMS error{fits}, which alone leaves "
             f"σ {float(sigma.max()) * 1000:.0f} mm in the estimate (across its line of sight, and along it as the "
             "markers' size reads their depth; no number of frames averages it away): a better calibration, a longer "
             "lens or a second camera at an angle would lower it")
@@ -546,7 +557,9 @@ def check_runs(rig: Rig, runs: dict[str, CameraRun], seconds: float) -> CheckRep
              if e.withheld == WITHHELD_BELOW}  # the offset the filter withheld, at the end
     topside = topside_pose(kf.x) if kf.topside_placed else None
     calibrations = {name: run.tracker.camera for name, run in runs.items()}
+    used = {name: lens_px(model.model_px, kf.cameras[name].corner_noise) for name, model in calibrations.items()
+            if name in kf.cameras}
     checks = cone_checks(rig, estimates, sights,
                          lambda cone, worst: lens_reason(lens_sigmas(kf.disagreement, cone, kf.time or 0.0),
-                                                         calibrations, worst))
+                                                         calibrations, worst, used))
     return CheckReport(rig, seconds, cameras, disagreements, checks, warnings, topside, kf.scale, below)

@@ -446,6 +446,9 @@ def test_a_calibrations_stated_error_is_named_where_it_holds_the_cone_up() -> No
     assert "cam_1's calibration states no error, taken as 0.50 px RMS error" in lens_reason(lens, unstated, 0.04)
     assert lens_reason(lens, calibrations, worst=0.031 / LENS_NOTE_SHARE) == ""
     assert lens_reason({}, calibrations, worst=0.04) == ""
+    fitted = lens_reason(lens, calibrations, 0.04, used={"cam_1": 1.2})  # its fits leave more than it states
+    assert "cam_1's calibration states 0.90 px RMS error and its fits of the markers leave 1.20 px" in fitted
+    assert "fits" not in lens_reason(lens, calibrations, 0.04, used={"cam_1": 0.9})
 
 
 def test_a_poor_calibration_is_named_as_the_reason(clip: Path, runs: dict[str, CameraRun], tmp_path: Path) -> None:

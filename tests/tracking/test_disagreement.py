@@ -230,3 +230,17 @@ def looking(o: BodyObservation, R_view: np.ndarray, depth_sd_m: float) -> BodyOb
     T_jt = inverse(o.jacket.T_camera_body) @ o.topside.T_camera_body
     return replace(o, jacket=replace(o.jacket, T_camera_body=T_cj, covariance=cov),
                    topside=replace(o.topside, T_camera_body=T_cj @ T_jt, covariance=cov))
+
+
+def test_a_cameras_lens_error_is_what_its_fits_leave_where_that_is_more() -> None:
+    """The lens floor takes what a camera's calibration states, or what its own fits of the markers leave where that is
+    more (caliscope's cam_0: 0.19 px stated, 0.4 px left); an exact calibration (0 px) stays exact, its fits' corner
+    noise averaging over frames; before three fits, the statement alone."""
+    from tracking.estimator.noise import CornerNoise, lens_px
+
+    noise = CornerNoise()
+    assert lens_px(0.19, noise) == 0.19  # no fits yet
+    noise.samples.extend([0.4**2] * 5)
+    assert lens_px(0.19, noise) == pytest.approx(0.4)
+    assert lens_px(0.6, noise) == 0.6
+    assert lens_px(0.0, noise) == 0.0

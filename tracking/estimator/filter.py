@@ -42,6 +42,7 @@ from tracking.estimator.noise import (
     block_noises,
     camera_psds,
     fits_its_corners,
+    lens_px,
     prior_covariance,
     topside_psds,
 )
@@ -146,7 +147,8 @@ class TopsideFilter(FilterState):
         if cam is None:
             return False
         placed = self.topside_placed
-        residuals = self.disagreement.residuals(o, *((self.x, self.P) if placed else (None, None)))
+        lensed = replace(o, model_px=lens_px(o.model_px, cam.corner_noise))  # its lens floor's view of the frame
+        residuals = self.disagreement.residuals(lensed, *((self.x, self.P) if placed else (None, None)))
         self._measure_scale(o)
         cam.corner_noise.add(o.jacket)
         cam.model_px = o.model_px
@@ -160,7 +162,7 @@ class TopsideFilter(FilterState):
         if not self.topside_placed and (o.topside is None or not place_topside(self, cam, o.topside)):
             o = replace(o, topside=None, corners={i: c for i, c in o.corners.items() if i in self.jacket_corners})
         if not placed and self.topside_placed:  # placed by this frame: its calibration's error holds from it on
-            residuals = self.disagreement.residuals(o, self.x, self.P, counted=False)
+            residuals = self.disagreement.residuals(lensed, self.x, self.P, counted=False)
         jacket = {i: z for i, z in o.corners.items() if i in self.jacket_corners}
         self._measure_motion(cam, o.time, jacket, o.K, o.jacket)
         topside = {i: z for i, z in o.corners.items() if i in self.topside_corners and self.topside_placed}
