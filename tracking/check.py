@@ -467,7 +467,7 @@ def lens_reason(lens: dict[str, np.ndarray], calibrations: dict[str, CameraModel
                 used: dict[str, float] | None = None) -> str:
     """'; CAM's calibration states ... px ...' when the σ one camera's calibration error (CameraModel.model_px: the
     stated RMS, or UNSTATED_RMS_PX where it states none) alone gives a cone's estimate (lens: camera -> (3,) m, in its
-    share, tracking.estimator.disagreement.lens_sigmas) is LENS_NOTE_SHARE of its worst σ or more, else ''; used:
+    weight, tracking.estimator.disagreement.lens_sigmas) is LENS_NOTE_SHARE of its worst σ or more, else ''; used:
     camera -> the model error taken, px, where its own fits of the markers leave more (estimator.noise.lens_px)."""
     if not lens:
         return ""
@@ -479,9 +479,9 @@ def lens_reason(lens: dict[str, np.ndarray], calibrations: dict[str, CameraModel
     taken = (used or {}).get(camera, model.model_px)
     fits = f" and its fits of the markers leave {taken:.2f} px" if taken > model.model_px + 0.005 else ""
     return (f"; {camera}'s calibration {states} {model.model_px:.2f} px RMS error{fits}, which alone leaves "
-            f"σ {float(sigma.max()) * 1000:.0f} mm in the estimate (across its line of sight, and along it as the "
-            "markers' size reads their depth; no number of frames averages it away): a better calibration, a longer "
-            "lens or a second camera at an angle would lower it")
+            f"σ {float(sigma.max()) * 1000:.0f} mm in the estimate (across its line of sight, and along it, as the "
+            "markers' size reads their depth, while no second camera is compared; no number of frames averages it "
+            "away): a better calibration, a longer lens or a second camera at an angle would lower it")
 
 
 def unstated_errors(rig: Rig, runs: dict[str, CameraRun]) -> list[str]:

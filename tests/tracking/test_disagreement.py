@@ -194,9 +194,11 @@ def test_a_calibrations_stated_error_floors_the_cone_across_and_along_the_line_o
 
 def test_a_second_camera_at_right_angles_carries_the_first_ones_depth() -> None:
     """Two cameras 20 m from cone A, one looking along the jacket's z and one along its x, their calibrations 0.5 px
-    off: each alone leaves its depth off by 20 times its cross-sight error; fused by their fits' information (each
-    fit's depth 20 times looser, as a marker's size reads it), each axis takes the error of the camera that sees it
-    across, not the other's depth (before they are compared: after, their disagreement measures it)."""
+    off: each alone leaves its depth off by 20 times its cross-sight error. Fused, each one's depth error goes by its
+    fits' information there (20 times looser, as a marker's size reads it): next to nothing, where by its share it
+    would be a quarter of 400 s². Their cross-sight errors go by their shares, as they always have: a quarter of s²
+    each (the exact first-order sum would be four times that on the two depth axes, see docs/method.md). Before they
+    are compared: after, their disagreement measures it; check names the same σ (lens_sigmas)."""
     along_x = np.eye(4)
     along_x[:3, :3] = [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]  # the camera's z is the jacket's x
     along_x[:3, 3] = [0.0, 0.0, 20.0]
@@ -214,8 +216,25 @@ def test_a_second_camera_at_right_angles_carries_the_first_ones_depth() -> None:
     np.testing.assert_allclose(alone["a"].floors(t)[0][0], [s2, s2, 400 * s2], rtol=0.01)  # its depth: the jacket z
     np.testing.assert_allclose(alone["b"].floors(t)[0][0], [400 * s2, s2, s2], rtol=0.01)
     floor = fused.floors(t)[0][0]
-    assert floor[0] < 2 * s2 and floor[2] < 2 * s2  # each depth carried by the other's cross-sight
-    assert floor[1] == pytest.approx(s2 / 2, rel=0.05)  # y: across both, equal weights
+    np.testing.assert_allclose(floor, [s2 / 4, s2 / 2, s2 / 4], rtol=0.05)  # x, z: one camera's across; y: both
+    named = lens_sigmas(fused, "A", t)
+    np.testing.assert_allclose(named["a"] ** 2 + named["b"] ** 2, floor, rtol=1e-6)
+    assert lens_sigmas(alone["a"], "A", t)["a"][2] == pytest.approx(20 * np.sqrt(s2), rel=0.01)  # alone: its depth
+
+
+def test_a_camera_compared_against_one_too_poor_to_count_keeps_its_depth_floor() -> None:
+    """Camera a steady, camera b scattering 40 mm a frame (its frames carry under a tenth of the estimate, so the
+    disagreement compares nothing): a's depth error is still assumed, as if alone, not dropped for a comparison that
+    never happened."""
+    d = cone()
+    d.side = 1.0
+    s2 = (LENS_SHARE * 0.5 * 20.0 / 2000.0) ** 2
+    t = 0.0
+    for i in range(30):
+        t = i / RATE_HZ
+        keep(d, view("a", t, np.zeros(3), model_px=0.5), X, P)
+        keep(d, view("b", t + 0.01, np.full(3, (-1) ** i * 40 * MM), sigma_m=40 * MM), X, P)
+    assert d.floors(t)[0][0][2] > 50 * s2  # a's depth (400 s² alone), not its cross-sight alone
 
 
 def looking(o: BodyObservation, R_view: np.ndarray, depth_sd_m: float) -> BodyObservation:

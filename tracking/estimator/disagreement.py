@@ -222,28 +222,39 @@ class Disagreement:
             recent = [c for c, t in cameras.items() if time - t <= DISAGREEMENT_WINDOW_S]
             cone = self.names[k]
             ms = {c: self.moments.get((c, cone)) for c in recent}
-            compared = {c: m for c, m in ms.items() if m is not None and m.count >= DISAGREEMENT_MIN_FRAMES}
+            if len(recent) >= 2:
+                pending[k] = any((m is None or not m.known) and time - self.first_seen[(c, cone)] <=
+                                 DISAGREEMENT_WAIT_S for c, m in ms.items())  # a camera new to it, its noise unknown
+            disagreement, kept = self._compare(k, ms)
             if self.lensed:  # every camera that made the estimate, not only recent ones: its error stays; along the
                 # line of sight assumed only where no two cameras are compared (their disagreement measures it)
                 held = [m for c in cameras if (m := self.moments.get((c, cone))) is not None and m.w_lens > 0.0]
-                out[k] = _lens(held, time, along=len(compared) < 2)
-            if len(recent) < 2:
-                continue
-            pending[k] = any((m is None or not m.known) and time - self.first_seen[(c, cone)] <= DISAGREEMENT_WAIT_S
-                             for c, m in ms.items())  # a camera new to the cone whose noise is not known yet
-            key = (tuple(compared), self.versions.get(k, 0))
-            if self._cache.get(k, (None,))[0] != key:  # the moments changed since: compare again
-                self._cache[k] = (key, _compared(list(compared.values())))
-            out[k] = np.maximum(out[k], self._cache[k][1])
+                out[k] = _lens(held, time, along=kept < 2)
+            out[k] = np.maximum(out[k], disagreement)
         return out, pending
+
+    def _compare(self, k: int, ms: dict[str, _Moments | None]) -> tuple[np.ndarray, int]:
+        """(3,) the disagreement floor of cone k's recent cameras (ms: camera -> its moments there) and how many
+        cameras it compared (those with frames enough that carry DISAGREEMENT_MIN_SHARE of the estimate), cached
+        while their moments stay."""
+        compared = {c: m for c, m in ms.items() if m is not None and m.count >= DISAGREEMENT_MIN_FRAMES}
+        if len(compared) < 2:
+            return np.zeros(3), 0
+        key = (tuple(compared), self.versions.get(k, 0))
+        if self._cache.get(k, (None,))[0] != key:  # the moments changed since: compare again
+            self._cache[k] = (key, _compared(list(compared.values())))
+        return self._cache[k][1]
 
 
 def lens_sigmas(d: Disagreement, cone: str, time: float) -> dict[str, np.ndarray]:
     """Per camera that has shown a cone's pair, the σ (3,) its calibration's error gives the cone's estimate at
-    a time, m: its own (_lens_at, as its frames weighed it) through its weight in the estimate (_lens)."""
+    a time, m: its own (_lens_at, as its frames weighed it) through its weight in the estimate (_lens_parts), along
+    its line of sight too where no two cameras are compared (as Disagreement.floors)."""
+    k = d.names.index(cone)
+    recent = [c for c, t in d.by_cone.get(k, {}).items() if time - t <= DISAGREEMENT_WINDOW_S]
+    _, kept = d._compare(k, {c: d.moments.get((c, cone)) for c in recent})
     ms = {c: m for (c, name), m in d.moments.items() if name == cone and m.w_lens > 0.0}
-    compared = sum(m.count >= DISAGREEMENT_MIN_FRAMES and time - m.time <= DISAGREEMENT_WINDOW_S for m in ms.values())
-    parts = _lens_parts(list(ms.values()), time, along=compared < 2)
+    parts = _lens_parts(list(ms.values()), time, along=kept < 2)
     return {c: np.sqrt(part) for c, part in zip(ms, parts, strict=True)}
 
 
@@ -316,15 +327,16 @@ def _lens(ms: list[_Moments], time: float, along: bool = True) -> np.ndarray:
     return np.sum(_lens_parts(ms, time, along), axis=0)
 
 
-def _compared(ms: list[_Moments]) -> np.ndarray:
-    """(3,) variance of the estimate's error the persistent disagreement of cameras with frames enough gives, m²."""
+def _compared(ms: list[_Moments]) -> tuple[np.ndarray, int]:
+    """(3,) variance of the estimate's error the persistent disagreement of cameras with frames enough gives, m², and
+    how many of them carry enough of the estimate to be compared."""
     if len(ms) < 2:
-        return np.zeros(3)
+        return np.zeros(3), 0
     precision = np.array([m.frames / max(float(m.scatter.sum()), 1e-12) for m in ms])
     keep = precision >= DISAGREEMENT_MIN_SHARE * precision.sum()  # the cameras that make the estimate
     ms, precision = [m for m, kept in zip(ms, keep, strict=True) if kept], precision[keep]
     if len(ms) < 2:
-        return np.zeros(3)
+        return np.zeros(3), len(ms)
     means = np.array([m.mean for m in ms])
     between = means.var(axis=0, ddof=1)
     noise = np.mean([m.noise for m in ms], axis=0)
@@ -332,4 +344,4 @@ def _compared(ms: list[_Moments]) -> np.ndarray:
     significant = chi2_quantile(dof, DISAGREEMENT_P) / dof if dof > 1 else \
         NormalDist().inv_cdf((1.0 + DISAGREEMENT_P) / 2.0) ** 2  # one degree of freedom: a squared normal
     shares = precision / precision.sum()  # each camera's share of the estimate
-    return np.where(between > significant * noise, between - noise, 0.0) * float(shares @ shares)
+    return np.where(between > significant * noise, between - noise, 0.0) * float(shares @ shares), len(ms)

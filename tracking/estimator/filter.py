@@ -146,13 +146,13 @@ class TopsideFilter(FilterState):
         cam = self.cameras.get(o.camera)
         if cam is None:
             return False
-        placed = self.topside_placed
-        lensed = replace(o, model_px=lens_px(o.model_px, cam.corner_noise))  # its lens floor's view of the frame
-        residuals = self.disagreement.residuals(lensed, *((self.x, self.P) if placed else (None, None)))
         self._measure_scale(o)
         cam.corner_noise.add(o.jacket)
         cam.model_px = o.model_px
         cam.corner_noise.add(o.topside)
+        placed = self.topside_placed
+        lensed = replace(o, model_px=lens_px(o.model_px, cam.corner_noise))  # its lens floor's view of the frame
+        residuals = self.disagreement.residuals(lensed, *((self.x, self.P) if placed else (None, None)))
         if cam.T_jacket_camera is None:
             if o.jacket is None:
                 cam.waiting = "no jacket marker of the rig in its view (a camera is placed by the jacket's markers)"

@@ -221,7 +221,8 @@ class CornerNoise:
 
     @property
     def fits_px(self) -> float | None:
-        """What its fits leave a corner coordinate, px, unfloored; None before CORNER_NOISE_MIN_SAMPLES fits."""
+        """What its fits leave a corner, px, unfloored: the 2-D RMS (as a calibration states its error, OpenCV's RMS
+        a point's miss), √2 its σ a coordinate; None before CORNER_NOISE_MIN_SAMPLES fits."""
         if len(self.samples) < CORNER_NOISE_MIN_SAMPLES:
             return None
         return float(np.sqrt(np.median(self.samples)))
@@ -232,6 +233,7 @@ def lens_px(stated: float, noise: CornerNoise) -> float:
     (CameraModel.model_px), or what its own fits of the markers leave where that is more, the lens, the print and the
     corners together (caliscope's cam_0 states 0.19 px and its fits leave 0.36-0.42: alone, its Δz held 87 % of its
     errors within 2σ, 100 % so). A calibration stating none (0 px, an exact one's: a render's) stays at none: its fits
-    leave corner noise, which its frames average, not a model error."""
+    leave corner noise, which its frames average, not a model error; one stating any error is a real lens's, whose
+    fits leave its model error and its corners' together, taken as lasting (conservative)."""
     fits = noise.fits_px
     return max(stated, fits) if stated > 0.0 and fits is not None else stated
