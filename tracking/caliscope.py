@@ -218,8 +218,14 @@ def _camera_tables(folder: Path, videos: Path) -> tuple[Path, dict[int, dict[str
         found = sorted({int(m) for n in VIDEO_NAMES for v in videos.glob(n.format("*"))
                         if (m := v.stem.rpartition("_")[2]).isascii() and m.isdecimal()}) if videos.is_dir() else []
         if not found:
-            raise InputError(folder, "no camera_array.toml or config.toml, nor cam_N.mp4 videos in "
-                                     f"{videos} (expected a caliscope session folder)")
+            tables = "no camera tables in config.toml" if config.is_file() else "no camera_array.toml or config.toml"
+            intrinsic = sorted(v.name for n in VIDEO_NAMES for v in (folder / "calibration" / "intrinsic").glob(
+                n.format("*"))) if (folder / "calibration" / "intrinsic").is_dir() else []
+            alone = f"; calibration/intrinsic holds {', '.join(intrinsic)}, each camera filmed on its own, not one " \
+                    "scene at one time (to track one alone: a folder of its own with charuco.toml and the video as " \
+                    "calibration/extrinsic/cam_N.mp4)" if intrinsic else ""
+            raise InputError(folder, f"{tables}, nor cam_N.mp4 videos in {videos} (expected a caliscope session "
+                                     f"folder){alone}")
         return videos, {n: {} for n in found}
     out = {}
     for number, key, table in tables:

@@ -140,6 +140,23 @@ def test_import_caliscope_refuses_a_folder_that_is_no_session_in_one_line(tmp_pa
     assert not (tmp_path / "x").exists()
 
 
+def test_a_session_of_intrinsic_videos_alone_says_so_and_how_to_track_one(caliscope: Path, tmp_path: Path) -> None:
+    """caliscope's prerecorded_calibration: charuco.toml, a config.toml without camera tables and each camera's own
+    intrinsic video, filmed one at a time. Refused in one line that names what it holds and how to track one alone."""
+    session = tmp_path / "session"
+    (session / "calibration" / "intrinsic").mkdir(parents=True)
+    shutil.copy(caliscope / "charuco_calibration" / "charuco.toml", session / "charuco.toml")
+    (session / "config.toml").write_text("CreationDate = 2023-05-06T11:12:27.631355\n")
+    for n in (0, 1):
+        (session / "calibration" / "intrinsic" / f"cam_{n}.mp4").write_bytes(b"")
+    bad = subprocess.run([sys.executable, "-m", "tracking.cli", "import-caliscope", str(session), "-o",
+                          str(tmp_path / "x")], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+    assert "no camera tables in config.toml" in bad.stderr
+    assert "calibration/intrinsic holds cam_0.mp4, cam_1.mp4, each camera filmed on its own" in bad.stderr
+    assert not (tmp_path / "x").exists()
+
+
 @pytest.mark.parametrize(("edit", "field"), [
     (lambda t: t.replace("[cameras.0]\ncam_id =0", '[cameras.0]\ncam_id ="front"'), "0"),
     (lambda t: t.replace("rotation_count = 0", 'rotation_count = "none"', 1), "cam_0.rotation_count"),
