@@ -215,17 +215,9 @@ def _camera_tables(folder: Path, videos: Path) -> tuple[Path, dict[int, dict[str
         path, tables = config, [(str(t.get("port", k.removeprefix("cam_"))), k, t) for k, t in settings.items()
                                 if k.startswith("cam_") and isinstance(t, dict)]
     else:
-        found = sorted({int(m) for n in VIDEO_NAMES for v in videos.glob(n.format("*"))
-                        if (m := v.stem.rpartition("_")[2]).isascii() and m.isdecimal()}) if videos.is_dir() else []
+        found = _numbered_videos(videos)
         if not found:
-            tables = "no camera tables in config.toml" if config.is_file() else "no camera_array.toml or config.toml"
-            intrinsic = sorted(v.name for n in VIDEO_NAMES for v in (folder / "calibration" / "intrinsic").glob(
-                n.format("*"))) if (folder / "calibration" / "intrinsic").is_dir() else []
-            alone = f"; calibration/intrinsic holds {', '.join(intrinsic)}, each camera filmed on its own, not one " \
-                    "scene at one time (to track one alone: a folder of its own with charuco.toml and the video as " \
-                    "calibration/extrinsic/cam_N.mp4)" if intrinsic else ""
-            raise InputError(folder, f"{tables}, nor cam_N.mp4 videos in {videos} (expected a caliscope session "
-                                     f"folder){alone}")
+            raise _no_cameras(folder, videos, config)
         return videos, {n: {} for n in found}
     out = {}
     for number, key, table in tables:
@@ -304,6 +296,25 @@ def read_times(videos: Path) -> tuple[Path, dict[int, pd.DataFrame]]:
                                    "after the one before it (expected one row per frame, in time order)", "frame_time")
         out[int(number)] = pd.DataFrame({"frame": np.arange(len(rows)), "time": (times - t0).round(6)})
     return path, out
+
+
+def _numbered_videos(folder: Path) -> dict[int, Path]:
+    """A folder's cameras' videos (cam_N.mp4, port_N.mp4) by camera number, in number order."""
+    found = {int(m): v for n in VIDEO_NAMES for v in folder.glob(n.format("*"))
+             if (m := v.stem.rpartition("_")[2]).isascii() and m.isdecimal()} if folder.is_dir() else {}
+    return dict(sorted(found.items()))
+
+
+def _no_cameras(folder: Path, videos: Path, config: Path) -> InputError:
+    """The error of a session with neither camera tables nor videos in videos; one of intrinsic videos alone (each
+    camera filmed on its own) says so and how to track one."""
+    tables = "no camera tables in config.toml" if config.is_file() else "no camera_array.toml or config.toml"
+    intrinsic = [v.name for v in _numbered_videos(folder / "calibration" / "intrinsic").values()]
+    alone = f"; calibration/intrinsic holds {', '.join(intrinsic)}, each camera filmed on its own, not one scene at " \
+            "one time (to track one alone: a folder of its own with charuco.toml and the video as " \
+            "calibration/extrinsic/cam_N.mp4)" if intrinsic else ""
+    return InputError(folder, f"{tables}, nor cam_N.mp4 videos in {videos} (expected a caliscope session folder)"
+                              f"{alone}")
 
 
 def _video(videos: Path, number: int) -> Path | None:

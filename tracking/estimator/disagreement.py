@@ -65,7 +65,7 @@ LENS_SHARE = float(np.sqrt(2.0))  # (no unit) × a calibration's RMS reprojectio
 # (model_px / √2, LENS_SHARE 1), caliscope's post_monocal kept 9.7 % of its Δy errors beyond 3σ in its first seconds.
 # Along the line of sight the same miss scales a marker's image of side S by √2 model_px over its f S / Z pixels: its
 # depth off by Z / S times as much (caliscope's 4_cam_recording, cam_0 alone at 16 sides: Δy 2.5 mm off for seconds
-# at σ 0.6 mm, 54 % of its errors beyond 3σ, when nothing took its depth to be off; 3.1 mm with it)
+# at σ 0.6 mm, 54 % of its errors beyond 3σ, when nothing took its depth to be off; about 3 mm with it)
 INFO_FLOOR_M = 1e-6  # σ added to a frame's offset covariance before it is inverted into information (a fit's
 # covariance is positive definite; this keeps a degenerate one finite)
 DISAGREEMENT_P = 0.95  # the cameras' means must scatter beyond what their noise gives at this probability (χ² over
@@ -83,16 +83,16 @@ class _Moments:
     w2: float = 0.0  # Σ weights²
     s1: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r
     s2: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w r²
-    s_across: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))  # Σ w L: its calibration's error across
-    s_along: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))  # ... and along its line of sight, m²
+    s_across: np.ndarray = field(default_factory=lambda: np.zeros(3))  # Σ w diag(L): its calibration's error across
+    s_along: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))  # Σ w L: ... and along its line of sight, m²
     info: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))  # Σ Λ: its frames' information at the cone
     w_lens: float = 0.0  # Σ weights of the frames its lens terms hold (the residuals' and the placing frame's)
 
     def add(self, time: float, r: np.ndarray, weight: float, lens: tuple[np.ndarray, np.ndarray],
             info: np.ndarray, counted: bool = True) -> None:
-        """A frame's residual r (3,) of weight 1 / σ², its lens covariances (across, along) and information; not
+        """A frame's residual r (3,) of weight 1 / σ², its lens terms (across (3,), along (3, 3)) and information; not
         counted: its lens terms alone (the frame that placed the topside, its residual against itself)."""
-        k = float(np.exp(-max(0.0, time - self.time) / DISAGREEMENT_TAU_S))
+        k = self.aged(time)
         c = 1.0 if counted else 0.0
         self.count = k * self.count + c
         self.known = self.known or self.count >= DISAGREEMENT_MIN_FRAMES
@@ -113,10 +113,20 @@ class _Moments:
     def mean(self) -> np.ndarray:
         return self.s1 / self.w
 
-    def lens(self, along: bool = True) -> np.ndarray:
-        """(3, 3) covariance its calibration's error gives its offset at the cone, m² (weighted as its residuals):
-        across its line of sight, and along it too where along."""
-        return (self.s_across + self.s_along if along else self.s_across) / self.w_lens
+    @property
+    def across(self) -> np.ndarray:
+        """(3,) variance its calibration's error gives its offset at the cone across its line of sight, m² (weighted
+        as its residuals)."""
+        return self.s_across / self.w_lens
+
+    @property
+    def along(self) -> np.ndarray:
+        """(3, 3) covariance the same error gives it along its line of sight, m²."""
+        return self.s_along / self.w_lens
+
+    def aged(self, time: float) -> float:
+        """How much of its sums still counts at a time (DISAGREEMENT_TAU_S since its last frame)."""
+        return float(np.exp(-max(0.0, time - self.time) / DISAGREEMENT_TAU_S))
 
     @property
     def scatter(self) -> np.ndarray:
@@ -132,8 +142,9 @@ class _Moments:
 @dataclass(frozen=True)
 class Residuals:
     """One camera frame's view of the cones: those its two fits show (indices), and its residual (3,), weight (1 /
-    σ²), the covariance (3, 3) its calibration's error gives there and its own offset's information (3, 3, the
-    inverse of its fits' covariance there), at each where the filter had an estimate."""
+    σ²), the variance its calibration's error gives there (across its line of sight (3,), along it (3, 3)) and its own
+    offset's information (3, 3, the inverse of its fits' covariance there), at each where the filter had an
+    estimate."""
 
     camera: str
     time: float
@@ -192,7 +203,7 @@ class Disagreement:
         C = np.einsum("sij,jk,slk->sil", H[:, :, :6], cov, H[:, :, :6])  # (S, 3, 3) the fits' covariance at each cone
         fits = np.trace(C, axis1=1, axis2=2)  # their σ²
         filtered = np.einsum("sij,jk,sik->s", H, P[:STATE, :STATE], H)  # and the filter's own
-        across, along = _lens_at(o, self.points[seen], self.side)  # (S, 3, 3) each
+        across, along = _lens_at(o, self.points[seen], self.side)  # (S, 3) and (S, 3, 3)
         self.lensed = self.lensed or o.model_px > 0.0
         residuals = H @ (own - x[:STATE])
         return [(k, residuals[i], 1.0 / v, (across[i], along[i]), np.linalg.inv(C[i] + INFO_FLOOR_M**2 * np.eye(3)))
@@ -219,7 +230,7 @@ class Disagreement:
         compared (DISAGREEMENT_WAIT_S at most)."""
         out, pending = np.zeros((len(self.names), 3)), np.zeros(len(self.names), dtype=bool)
         for k, cameras in self.by_cone.items():
-            recent = [c for c, t in cameras.items() if time - t <= DISAGREEMENT_WINDOW_S]
+            recent = self._recent(k, time)
             cone = self.names[k]
             ms = {c: self.moments.get((c, cone)) for c in recent}
             if len(recent) >= 2:
@@ -232,6 +243,10 @@ class Disagreement:
                 out[k] = _lens(held, time, along=kept < 2)
             out[k] = np.maximum(out[k], disagreement)
         return out, pending
+
+    def _recent(self, k: int, time: float) -> list[str]:
+        """The cameras whose last view of cone k is within DISAGREEMENT_WINDOW_S of a time."""
+        return [c for c, t in self.by_cone.get(k, {}).items() if time - t <= DISAGREEMENT_WINDOW_S]
 
     def _compare(self, k: int, ms: dict[str, _Moments | None]) -> tuple[np.ndarray, int]:
         """(3,) the disagreement floor of cone k's recent cameras (ms: camera -> its moments there) and how many
@@ -251,8 +266,7 @@ def lens_sigmas(d: Disagreement, cone: str, time: float) -> dict[str, np.ndarray
     a time, m: its own (_lens_at, as its frames weighed it) through its weight in the estimate (_lens_parts), along
     its line of sight too where no two cameras are compared (as Disagreement.floors)."""
     k = d.names.index(cone)
-    recent = [c for c, t in d.by_cone.get(k, {}).items() if time - t <= DISAGREEMENT_WINDOW_S]
-    _, kept = d._compare(k, {c: d.moments.get((c, cone)) for c in recent})
+    _, kept = d._compare(k, {c: d.moments.get((c, cone)) for c in d._recent(k, time)})
     ms = {c: m for (c, name), m in d.moments.items() if name == cone and m.w_lens > 0.0}
     parts = _lens_parts(list(ms.values()), time, along=kept < 2)
     return {c: np.sqrt(part) for c, part in zip(ms, parts, strict=True)}
@@ -280,27 +294,26 @@ def _turn(rvec: np.ndarray) -> np.ndarray:
 
 
 def _lens_at(o: BodyObservation, points: np.ndarray, side: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """(S, 3, 3) covariances, jacket frame, m², of a frame's own offsets at cones at points (S, 3) (jacket frame) that
-    its camera's calibration error gives, at each one's depth Z along the unit line of sight l: across the line of
-    sight s² (I - l lᵀ), s = LENS_SHARE × model_px × Z / f, and along it (s Z / side)² l lᵀ for markers of that side
-    (side 0: none; nothing at 0 px, an exact calibration's)."""
+    """The variance, jacket frame, m², of a frame's own offsets at cones at points (S, 3) (jacket frame) that its
+    camera's calibration error gives, at each one's depth Z along the unit line of sight l: across the line of sight
+    the diagonal (S, 3) of s² (I - l lᵀ), s = LENS_SHARE × model_px × Z / f, and along it (s Z / side)² l lᵀ (S, 3, 3)
+    for markers of that side (side 0: none; nothing at 0 px, an exact calibration's)."""
     assert o.jacket is not None
     f = float(o.K[0, 0])
     if not (o.model_px > 0.0 and np.isfinite(o.model_px) and f > 0.0):
-        return np.zeros((len(points), 3, 3)), np.zeros((len(points), 3, 3))
+        return np.zeros((len(points), 3)), np.zeros((len(points), 3, 3))
     T = o.jacket.T_camera_body  # T_camera_jacket
     p = points @ T[:3, :3].T + T[:3, 3]  # (S, 3) the cones in the camera
     depth = np.maximum(p[:, 2], 0.0)
     sight = p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-9) @ T[:3, :3]  # (S, 3) in the jacket frame
     s2 = (LENS_SHARE * o.model_px * depth / f) ** 2
     along = s2 * (depth / side) ** 2 if side > 0.0 else np.zeros_like(s2)
-    ll = sight[:, :, None] * sight[:, None, :]  # (S, 3, 3) l lᵀ
-    return s2[:, None, None] * (np.eye(3) - ll), along[:, None, None] * ll
+    return s2[:, None] * (1.0 - sight**2), along[:, None, None] * sight[:, :, None] * sight[:, None, :]
 
 
 def _shares(ms: list[_Moments], time: float) -> np.ndarray:
     """(M,) each camera's share of a cone's estimate at a time: its residuals' weight, aged to then."""
-    w = np.array([m.w_lens * np.exp(-max(0.0, time - m.time) / DISAGREEMENT_TAU_S) for m in ms])
+    w = np.array([m.w_lens * m.aged(time) for m in ms])
     return w / w.sum() if w.sum() > 0.0 else np.zeros(len(ms))
 
 
@@ -311,12 +324,12 @@ def _lens_parts(ms: list[_Moments], time: float, along: bool = True) -> list[np.
     times looser than its image's place, so another camera's cross-sight, not its share, carries that axis."""
     if not ms:
         return []
-    across = [share**2 * np.diagonal(m.lens(along=False)) for share, m in zip(_shares(ms, time), ms, strict=True)]
+    across = [share**2 * m.across for share, m in zip(_shares(ms, time), ms, strict=True)]
     if not along:
         return across
-    info = [m.info * np.exp(-max(0.0, time - m.time) / DISAGREEMENT_TAU_S) for m in ms]
+    info = [m.info * m.aged(time) for m in ms]
     weights = np.linalg.pinv(np.sum(info, axis=0)) @ np.stack(info)  # (M, 3, 3) W_c
-    return [a + np.diagonal(W @ (m.s_along / m.w_lens) @ W.T) for a, W, m in zip(across, weights, ms, strict=True)]
+    return [a + np.diagonal(W @ m.along @ W.T) for a, W, m in zip(across, weights, ms, strict=True)]
 
 
 def _lens(ms: list[_Moments], time: float, along: bool = True) -> np.ndarray:
