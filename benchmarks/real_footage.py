@@ -12,7 +12,9 @@ the containers' nominal presentation times instead of the times files. Results: 
 Run: .venv/bin/python benchmarks/real_footage.py; with --sessions FOLDER... other caliscope sessions (its repository's
 tests/sessions: 4_cam_recording, post_monocal, charuco_calibration_2_cam) into real_footage-caliscope.md. With
 --each-camera, every camera tracked alone (a rig of that camera only: one view's depth, as a cone one camera sees),
-its offsets' figures and why the rest of its frames were not shown, into real_footage-each-camera.md.
+its offsets' figures and why the rest of its frames were not shown, into real_footage-each-camera.md. With --pairs,
+every stacked pair of the board alone (one jacket marker and the topside marker above it: one marker a body, as a
+cone's pair offshore), all cameras fused, into real_footage-pairs.md.
 """
 
 from __future__ import annotations
@@ -87,13 +89,14 @@ def both_groups_times(results: list) -> np.ndarray:
 
 
 def scored(df: pd.DataFrame, seen: np.ndarray, side: float) -> dict:
-    """An estimator's offsets against zero: per axis e_MAE and |e|max (mm, % of the side), within 2σ, beyond 3σ;
-    availability."""
+    """An estimator's offsets against zero: per axis e_MAE and |e|max (mm, % of the side), within 2σ, beyond 3σ, over
+    the samples that axis shows; availability (a sample showing any axis)."""
     shown = df.dropna(subset=["dx"])
     out: dict = {"availability": float(np.isin(np.round(seen, 6), np.round(shown["time"].to_numpy(), 6)).mean())
                  if len(seen) else float("nan")}
     for a in AXES:
         e, s = shown[f"d{a}"].to_numpy(), shown[f"sd{a}"].to_numpy()
+        e, s = e[np.isfinite(e)], s[np.isfinite(e)]  # an axis withheld alone (its σ beyond the limit)
         out[a] = (np.mean(np.abs(e)) * 1e3, np.max(np.abs(e)) * 1e3, np.mean(np.abs(e) <= 2 * s),
                   np.mean(np.abs(e) > 3 * s)) if len(e) else (np.nan,) * 4
     out["side_mm"] = side * 1e3
@@ -175,36 +178,60 @@ def figures(rig: Rig) -> dict:
                               rig.marker_size)}
 
 
-def each_camera(rig: Rig) -> list[str]:
-    """A table row per camera and mode of the rig's cameras each tracked alone: frames showing both groups, shown,
-    per axis e_MAE / |e|max (mm) and within 2σ / beyond 3σ, and why the rest were withheld."""
+def alone(label: str, rig: Rig) -> list[str]:
+    """A table row per mode of one rig tracked: frames showing both groups, shown, per axis e_MAE / |e|max (mm) and
+    within 2σ / beyond 3σ, and why the rest were withheld."""
+    results = list(track_rig(rig))
+    seen = both_groups_times(results)
+    if not len(seen):
+        return [f"| {label} | — | 0 | — | — | — | — | — | — | — | no frame shows both groups |"]
     rows = []
-    for camera in rig.cameras:
-        solo = rig.model_copy(update={"cameras": [camera]})
-        results = list(track_rig(solo))
-        seen = both_groups_times(results)
-        if not len(seen):
-            rows.append(f"| {camera.name} | — | 0 | — | — | — | — | — | — | — | no frame of it shows both groups |")
-            continue
-        for mode in ("fused", "smoothed"):
-            df = estimates(solo, results, mode)
-            r = scored(df, seen, solo.marker_size)
-            held = df[df["dx"].isna() & np.isin(np.round(df["time"], 6), np.round(seen, 6))]
-            why = ", ".join(f"{reason} ×{n}" for reason, n in Counter(held["withheld"]).most_common())
-            axes = " | ".join(f"{r[a][0]:.2f} / {r[a][1]:.1f}" for a in AXES)
-            cover = " | ".join(f"{r[a][2]:.0%} / {r[a][3]:.1%}" for a in AXES)
-            rows.append(f"| {camera.name} | {mode} | {len(seen)} | {r['availability']:.0%} | {axes} | {cover} | "
-                        f"{why or '—'} |")
+    for mode in ("fused", "smoothed"):
+        df = estimates(rig, results, mode)
+        r = scored(df, seen, rig.marker_size)
+        held = df[df["dx"].isna() & np.isin(np.round(df["time"], 6), np.round(seen, 6))]
+        why = ", ".join(f"{reason} ×{n}" for reason, n in Counter(held["withheld"]).most_common())
+        axes = " | ".join(f"{r[a][0]:.2f} / {r[a][1]:.1f}" for a in AXES)
+        cover = " | ".join(f"{r[a][2]:.0%} / {r[a][3]:.1%}" for a in AXES)
+        rows.append(f"| {label} | {mode} | {len(seen)} | {r['availability']:.0%} | {axes} | {cover} | {why or '—'} |")
     return rows
+
+
+TABLE_HEAD = ("frames with both groups | shown | x e_MAE / abs(e)max [mm] | y | z | x within 2σ / beyond 3σ | y | z | "
+              "withheld (of those frames) |", "| --- | --- | ---: | ---: | --- | --- | --- | --- | --- | --- | --- |")
 
 
 def each_camera_markdown(name: str, rig: Rig) -> str:
     """One session's table of its cameras tracked alone."""
     return "\n".join([f"## {name}", "", f"Offset error against zero (marker side {rig.marker_size * 1e3:.1f} mm), each "
-                      "camera alone:", "",
-                      "| camera | mode | frames with both groups | shown | x e_MAE / abs(e)max [mm] | y | z | "
-                      "x within 2σ / beyond 3σ | y | z | withheld (of those frames) |",
-                      "| --- | --- | ---: | ---: | --- | --- | --- | --- | --- | --- | --- |", *each_camera(rig)])
+                      "camera alone:", "", f"| camera | mode | {TABLE_HEAD[0]}", TABLE_HEAD[1],
+                      *(row for camera in rig.cameras
+                        for row in alone(camera.name, rig.model_copy(update={"cameras": [camera]})))])
+
+
+def stacked_pairs(rig: Rig) -> list[tuple[int, int]]:
+    """(jacket, topside) ids of the board's stacked pairs: each jacket marker with the nearest topside marker above it
+    in its column (centres within half a marker side across), as a cone's pair stands offshore."""
+    tops = [m for m in rig.markers if m.body == "topside"]
+    pairs = []
+    for j in (m for m in rig.markers if m.body == "jacket"):
+        above = [t for t in tops if abs(t.center[0] - j.center[0]) < rig.marker_size / 2 and t.center[2] > j.center[2]]
+        if above:
+            pairs.append((j.id, min(above, key=lambda t: t.center[2] - j.center[2]).id))
+    return pairs
+
+
+def pairs_markdown(name: str, rig: Rig) -> str:
+    """One session's table of its stacked pairs, each tracked alone by every camera: one marker a body, as offshore."""
+    rows = []
+    for jacket, topside in stacked_pairs(rig):
+        markers = {m.id: m for m in rig.markers}
+        gap = np.linalg.norm(np.subtract(markers[topside].center, markers[jacket].center)) / rig.marker_size
+        pair = rig.model_copy(update={"markers": [markers[jacket], markers[topside]]})
+        rows += alone(f"{jacket} / {topside} ({gap:.1f} sides apart)", pair)
+    return "\n".join([f"## {name}", "", f"Offset error against zero (marker side {rig.marker_size * 1e3:.1f} mm), each "
+                      "stacked pair alone (jacket / topside marker), every camera fused:", "",
+                      f"| pair | mode | {TABLE_HEAD[0]}", TABLE_HEAD[1], *rows])
 
 
 def markdown(name: str, s: dict) -> str:
@@ -250,14 +277,18 @@ def main() -> None:
     calibrations.add_argument("--self-calibrated", action="store_true",
                         help="track with each camera calibrated by `topside calibrate` from its own video of the "
                              "session's board (files suffixed -self-calibrated)")
-    parser.add_argument("--each-camera", action="store_true",
-                        help="track every camera alone (files suffixed -each-camera; the calibrations as given)")
+    apart = parser.add_mutually_exclusive_group()
+    apart.add_argument("--each-camera", action="store_true",
+                       help="track every camera alone (files suffixed -each-camera; the calibrations as given)")
+    apart.add_argument("--pairs", action="store_true",
+                       help="track every stacked pair of the board alone, one marker a body as offshore (files "
+                            "suffixed -pairs; the calibrations as given)")
     args = parser.parse_args()
     suffix = "-unstated" if args.unstated else "-self-calibrated" if args.self_calibrated else ""
-    if args.each_camera:
+    if args.each_camera or args.pairs:
         if args.unstated or args.self_calibrated:
-            parser.error("--each-camera takes the calibrations as given")
-        suffix = "-each-camera"
+            parser.error("--each-camera and --pairs take the calibrations as given")
+        suffix = "-each-camera" if args.each_camera else "-pairs"
     if args.sessions is None:
         parts = ["# Real footage: four webcams and a hand-held board", "",
                  f"Generated by `benchmarks/real_footage.py{suffix.replace('-', ' --', 1)}` "
@@ -266,6 +297,7 @@ def main() -> None:
         for name in SESSIONS:
             board = REPO.parent / "shared" / "data" / "caliscope" / name if args.self_calibrated else None
             parts += [each_camera_markdown(name, load_rig(REAL / name / "rig.yaml")) if args.each_camera else
+                      pairs_markdown(name, load_rig(REAL / name / "rig.yaml")) if args.pairs else
                       markdown(name, session(REAL / name / "rig.yaml", args.unstated, board)), ""]
         out = args.out or RESULTS.with_name(f"{RESULTS.stem}{suffix}.md")
     else:
@@ -279,6 +311,7 @@ def main() -> None:
             for folder in args.sessions:
                 rig_path = write_session(read_session(folder), Path(work) / folder.name)
                 parts += [each_camera_markdown(folder.name, load_rig(rig_path)) if args.each_camera else
+                          pairs_markdown(folder.name, load_rig(rig_path)) if args.pairs else
                           markdown(folder.name, session(rig_path, args.unstated,
                                                         folder if args.self_calibrated else None)), ""]
         out = args.out or RESULTS.with_name(f"real_footage-caliscope{suffix}.md")
@@ -289,6 +322,11 @@ def main() -> None:
         parts.insert(2, "Every camera tracked alone (`--each-camera`): a rig of that camera only, as a cone one camera "
                         "sees, whose depth rests on the markers' size and shape in one view. Shown: the share of the "
                         "camera's frames showing both groups at whose capture time an offset is shown.\n")
+    if args.pairs:
+        parts.insert(2, "Every stacked pair of the board tracked alone (`--pairs`): a rig of one jacket marker and the "
+                        "topside marker above it, as a cone's pair stands offshore, seen by every camera. Each "
+                        "camera's pose then rests on one marker a frame, whose turn its corners barely tell. Shown: "
+                        "the share of the frames showing both markers at whose capture time an offset is shown.\n")
     if args.self_calibrated:
         parts.insert(2, "Every camera calibrated from its own video of the session's board (`--self-calibrated`), as "
                         "`topside calibrate` and `import-caliscope` do, not by caliscope's calibrations: what a user "
