@@ -14,7 +14,7 @@ from tracking.estimate import WITHHELD_CLOCKS, WITHHELD_SIGMA, WITHHELD_WARMING
 from tracking.estimator import TopsideFilter, fused_estimates, smoothed_estimates
 from tracking.estimator.measurements import shape_kept
 from tracking.estimator.noise import REPORT_WARMUP_S, VIEW, VIEW_BIAS_TAU_S, VIEW_SHAPE_RENEW
-from tracking.estimator.process import PoseMotionLevel
+from tracking.estimator.process import PoseMotionLevel, orbit_psd
 from tracking.estimator.state import ViewBias
 from tracking.geometry import rotation, rotvec
 from tracking.offsets import BodyObservation, PairOffset, body_geometry, observe_bodies
@@ -374,6 +374,52 @@ def test_a_cameras_turns_give_its_level_and_noise_alone_gives_none() -> None:
     swung = turned_fits(np.outer(0.5 * np.cos(2 * np.pi * t), [0.0, 1.0, 0.0]), 6.0, 2e-3)
     assert swung.level is not None and swung.level > 0.1
     assert turned_fits(np.zeros((300, 3)), fps, 0.01).level is None
+
+
+def test_an_orbit_about_the_markers_leaves_their_image_still() -> None:
+    """orbit_psd spans the two turns about axes through the point, across the line of sight: moved along either, a
+    camera 30 m off still sees the point where it was (to second order), and nothing of its psd lies along the line of
+    sight or in a turn about it."""
+    centre, c = np.array([2.0, 1.0, 3.0]), np.array([10.0, 25.0, 18.0])
+    z = (centre - c) / np.linalg.norm(centre - c)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = np.column_stack([x, np.cross(z, x), z]), c  # T_jacket_camera, looking at the point
+    Q = orbit_psd(T, centre, 2.0)
+    w, V = np.linalg.eigh(Q)
+    assert np.allclose(w[:4], 0.0, atol=1e-9) and np.all(w[4:] > 0.0)
+    for v in V[:, 4:].T * 1e-4:  # a small turn along each orbit, about 3 mm at 30 m
+        R = rotation(v[:3]) @ T[:3, :3]
+        seen = R.T @ (centre - (c + v[3:]))
+        assert np.allclose(seen / seen[2], [0.0, 0.0, 1.0], atol=1e-7)  # still on the optical axis
+    along = np.concatenate([np.zeros(3), z])
+    about = np.concatenate([z, np.zeros(3)])
+    assert abs(along @ Q @ along) < 1e-9 and abs(about @ Q @ about) < 1e-9
+
+
+@pytest.mark.parametrize("mount", ["moving", "vessel"])
+def test_a_camera_whose_turns_are_not_read_keeps_its_orbit_only_on_a_mount_that_orbits(mount: str) -> None:
+    """A placed camera whose level (its images' alone, no turn read) lowered its noise to a hundredth: on `moving` its
+    mount's whole angular prior stays along the orbit about its jacket markers, its other noise lowered; a vessel's
+    camera rolls and sways, which its images show, so all of its noise is lowered."""
+    from tracking.estimator.noise import FilterTuning, camera_psds
+
+    kf = TopsideFilter(camera_rig(mount))
+    for o in observations(kf.rig, 1.0):
+        kf.predict(o.time, [o])
+        kf.update(o)
+    far = kf.cameras["far"]
+    assert far.T_jacket_camera is not None and far.centre is not None
+    far.motion_scale, far.turns.level = 0.01, None
+    prior = FilterTuning().motion(mount).angular_accel_psd
+    orbit = orbit_psd(far.T_jacket_camera, far.centre, 1.0)
+    v = np.linalg.eigh(orbit)[1][:, -1]  # an orbit's direction (6,)
+    lowered = v @ np.diag(camera_psds(FilterTuning(), mount, 0.01)) @ v
+    expected = lowered + (0.99 * prior * v @ orbit @ v if mount == "moving" else 0.0)
+    assert np.isclose(v @ kf._camera_psd(far) @ v, expected)
+    far.turns.level = 1.0  # a turn read: the level holds every direction
+    assert np.isclose(v @ kf._camera_psd(far) @ v, lowered)
 
 
 def test_a_still_camera_jolted_takes_the_move_up_at_once() -> None:

@@ -47,7 +47,7 @@ from tracking.estimator.noise import (
     topside_psds,
 )
 from tracking.estimator.placement import camera_covariance, place_camera, place_topside
-from tracking.estimator.process import Transition, rate_decay
+from tracking.estimator.process import Transition, orbit_psd, rate_decay
 from tracking.estimator.state import CameraPoses, CameraState, FilterState
 from tracking.geometry import inverse, numeric_jacobian, pose_params, pose_residual, rotation
 from tracking.offsets import BodyObservation
@@ -73,11 +73,11 @@ class TopsideFilter(FilterState):
         a_cam, b_cam = rate_decay(dt, CAMERA_RATE_TAU_S)  # the topside keeps its speed, cameras' rates revert
         a, b = np.full((blocks, 6), a_cam), np.full((blocks, 6), b_cam)
         a[0], b[0] = 1.0, dt
-        psds = np.zeros((blocks, 6))  # a camera not placed: none
-        psds[0] = topside_psds(self.tuning)
+        psds = np.zeros((blocks, 6, 6))  # a camera not placed: none
+        psds[0] = np.diag(topside_psds(self.tuning))
         for k, cam in enumerate(self.cameras.values()):
             if cam.T_jacket_camera is not None:
-                psds[1 + k] = camera_psds(self.tuning, cam.mount, cam.motion_scale)
+                psds[1 + k] = self._camera_psd(cam)
         noise = block_noises(dt, psds)
         bodies = Transition(a, b, noise, np.ones(self.size - self.body_size), self.renewal)
         self.x = bodies.apply(self.x[:, None])[:, 0]
@@ -88,6 +88,19 @@ class TopsideFilter(FilterState):
         keep = renew(self, observations)
         self._jolts(observations, noise, dt)
         return Transition(a, b, noise, keep, self.renewal)
+
+    def _camera_psd(self, cam: CameraState) -> np.ndarray:
+        """(6, 6) a placed camera's acceleration psd: its mount's scaled by its motion level, and on a mount that
+        orbits, where the level is only its images' (no turn of it measured) and it saw one jacket marker alone, its
+        mount's whole prior along an orbit about that marker, which leaves its image where it was (a board turned
+        before a webcam seen one marker a body, its fits ambiguous: the images' level lowered all of its noise, its
+        pose swung away while the topside took the move, 141 mm off at σ 22 mm)."""
+        psd = np.diag(camera_psds(self.tuning, cam.mount, cam.motion_scale))
+        motion = self.tuning.motion(cam.mount)
+        if motion.orbits and cam.motion_scale < 1.0 and cam.turns.level is None and cam.centre is not None and \
+                cam.T_jacket_camera is not None:
+            psd = psd + orbit_psd(cam.T_jacket_camera, cam.centre, (1.0 - cam.motion_scale) * motion.angular_accel_psd)
+        return psd
 
     def _jolts(self, observations: list[BodyObservation], noise: np.ndarray, dt: float) -> None:
         """A camera whose jacket corners in this frame say it moved beyond its prior (measurements.jolted) gets its
@@ -215,13 +228,18 @@ class TopsideFilter(FilterState):
     def _measure_motion(self, cam: CameraState, time: float, jacket: dict[int, np.ndarray], K: np.ndarray,
                         fit: BodyPose | None) -> None:
         """A frame's jacket corners and jacket fit into the camera's motion levels; its process noise scaled to the
-        larger of them (its images' motion, its turns where measured)."""
+        larger of them (its images' motion, its turns where measured). A lone marker's fit counts too: a camera that
+        orbits its one jacket marker keeps that marker's image still, and the image's level alone then lowered its
+        noise while its pose swung where one marker's corners barely tell (caliscope's webcams with one marker a body:
+        poses 90 mm off at σ 10 mm, offsets 26 % beyond 3σ). Its covariance misses a far view's biases, which read as
+        turns: they can only raise the level, and a far marker's fits rarely pass POSE_MOTION_SNR."""
         prior = self.tuning.motion(cam.mount)
         if not prior.adapts or not jacket:
             return
         cam.motion.add(time, jacket, float(K[0, 0] + K[1, 1]) / 2)
-        if fit is not None and fit.choice == Choice.UNIQUE and len(fit.marker_ids) >= 2:  # a lone far marker's
-            # rotation covariance misses the biases of a view off its normal (as in _jumped)
+        cam.centre = self.centres[next(iter(jacket))] if len(jacket) == 1 else None  # (several markers' corners
+        # tell an orbit about them: their images turn against each other)
+        if fit is not None and fit.choice == Choice.UNIQUE:  # (an ambiguous fit's turn may be the other option's)
             cam.turns.add(time, fit.T_camera_body[:3, :3], float(np.trace(fit.covariance[:3, :3])) / 3)
         if cam.level is not None:  # the mount is a prior: what the camera's images show decides, up to the brisk
             cam.motion_scale = float(np.clip(cam.level / prior.angular_accel_psd, MOTION_FLOOR,

@@ -124,6 +124,9 @@ class CameraMotion:
     prior_speed_mps: float
     adapts: bool = True  # its process noise follows the motion its images show (below); a hovering drone's
     # jitter is fast at every scale (its 1 s level understates its frame-to-frame motion), so it keeps its prior
+    orbits: bool = False  # it may circle what it films (a board turned before a webcam): a turn about its markers
+    # leaves their images still, so only its measured turns lower that part of its prior (process.orbit_psd); a vessel
+    # rolls and sways, which moves the images
 
 
 @dataclass(frozen=True)
@@ -141,8 +144,8 @@ class FilterTuning:
         CameraMotion("vessel", 1e-5, 0.1, 0.005, 0.3),  # on the crane vessel: metres and milliradians in waves
         CameraMotion("drone", 1e-3, 0.5, 0.05, 1.0,  # flying: 0.3 m/s and 0.01 rad/s, changing within seconds
                      adapts=False),
-        CameraMotion("moving", 10.0, 5.0, 1.0, 1.0),  # brisk: turns of 1 rad/s and 1 m/s changing within a second
-        # (a hand-held board 1 m from a webcam); a ceiling, which its images' motion level lowers (CameraMotionLevel)
+        CameraMotion("moving", 10.0, 5.0, 1.0, 1.0, orbits=True),  # brisk: turns of 1 rad/s and 1 m/s changing
+        # within a second (a hand-held board 1 m from a webcam); a ceiling, which its motion level lowers
     )
 
     def motion(self, mount: str) -> CameraMotion:
@@ -152,13 +155,14 @@ class FilterTuning:
 
 
 def block_noises(dt: float, psds: np.ndarray) -> np.ndarray:
-    """(B, 12, 12) white-noise-acceleration process noise of B bodies, psds (B, 6) per pose axis."""
-    q = np.asarray(psds, dtype=float).reshape(-1, 6)
+    """(B, 12, 12) white-noise-acceleration process noise of B bodies, psds (B, 6) per pose axis or (B, 6, 6) across
+    them."""
+    q = np.asarray(psds, dtype=float)
+    q = q.reshape(-1, 6)[:, :, None] * np.eye(6) if q.ndim < 3 else q
     Q = np.zeros((len(q), STATE, STATE))
-    i = np.arange(6)
-    Q[:, i, i] = q * dt**3 / 3
-    Q[:, i, i + 6] = Q[:, i + 6, i] = q * dt**2 / 2
-    Q[:, i + 6, i + 6] = q * dt
+    Q[:, :6, :6] = q * dt**3 / 3
+    Q[:, :6, 6:] = Q[:, 6:, :6] = q * dt**2 / 2
+    Q[:, 6:, 6:] = q * dt
     return Q
 
 

@@ -101,6 +101,22 @@ def renew_states(P: np.ndarray, d: np.ndarray, keep: np.ndarray, renewal: np.nda
     P[d, d] += (1.0 - keep**2) * renewal
 
 
+def orbit_psd(T_jacket_camera: np.ndarray, centre: np.ndarray, q: float) -> np.ndarray:
+    """(6, 6) acceleration psd (rotation, then position; jacket frame, as a camera's error states) of a camera orbiting
+    a point centre (3,) at angular psd q, rad²/s³: a turn by φ about an axis u through the point, across the camera's
+    line of sight to it, turns the camera by φ u and moves it by φ u × (c - centre), and leaves the point's image
+    where it was (what no image motion shows, and one marker's corners barely tell)."""
+    arm = T_jacket_camera[:3, 3] - centre
+    d = float(np.linalg.norm(arm))
+    if not d > 0.0:
+        return np.zeros((6, 6))
+    u1 = np.cross(arm, np.eye(3)[int(np.argmin(np.abs(arm)))])
+    u1 /= np.linalg.norm(u1)
+    u2 = np.cross(arm / d, u1)
+    V = np.array([np.concatenate([u, np.cross(u, arm)]) for u in (u1, u2)])  # (2, 6)
+    return q * V.T @ V
+
+
 @dataclass
 class CameraMotionLevel:
     """How much a camera moves, from the image motion of the jacket markers it sees (fixed in the world).

@@ -126,6 +126,8 @@ class CameraState:
     corner_noise: CornerNoise = field(default_factory=lambda: CornerNoise())  # its corners' σ, measured
     model_px: float = 0.0  # its calibration's RMS reprojection error, px (BodyObservation.model_px)
     motion_scale: float = 1.0  # share of its mount's process noise the camera gets (1 until its level is known)
+    centre: np.ndarray | None = None  # (3,) the centre of its last jacket view's marker when it saw one alone, jacket
+    # frame: what it may orbit unseen (estimator.process.orbit_psd); None when it saw several
     hypotheses: Hypotheses | None = None  # while an ambiguous jacket view waits: its options and their evidence
     waiting: str = NOT_SEEN  # why it is not placed (empty once placed)
     placed_at: float | None = None  # capture time of its (last) placement, s
