@@ -91,7 +91,7 @@ def both_groups_times(results: list) -> np.ndarray:
 def scored(df: pd.DataFrame, seen: np.ndarray, side: float) -> dict:
     """An estimator's offsets against zero: per axis e_MAE and |e|max (mm, % of the side), within 2σ, beyond 3σ, over
     the samples that axis shows; availability (a sample showing any axis)."""
-    shown = df.dropna(subset=["dx"])
+    shown = df.dropna(subset=["dx", "dy", "dz"], how="all")
     out: dict = {"availability": float(np.isin(np.round(seen, 6), np.round(shown["time"].to_numpy(), 6)).mean())
                  if len(seen) else float("nan")}
     for a in AXES:
@@ -189,7 +189,7 @@ def alone(label: str, rig: Rig) -> list[str]:
     for mode in ("fused", "smoothed"):
         df = estimates(rig, results, mode)
         r = scored(df, seen, rig.marker_size)
-        held = df[df["dx"].isna() & np.isin(np.round(df["time"], 6), np.round(seen, 6))]
+        held = df[df[["dx", "dy", "dz"]].isna().all(axis=1) & np.isin(np.round(df["time"], 6), np.round(seen, 6))]
         why = ", ".join(f"{reason} ×{n}" for reason, n in Counter(held["withheld"]).most_common())
         axes = " | ".join(f"{r[a][0]:.2f} / {r[a][1]:.1f}" for a in AXES)
         cover = " | ".join(f"{r[a][2]:.0%} / {r[a][3]:.1%}" for a in AXES)

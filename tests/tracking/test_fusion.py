@@ -389,7 +389,7 @@ def test_an_orbit_about_the_markers_leaves_their_image_still() -> None:
     Q = orbit_psd(T, centre, 2.0)
     w, V = np.linalg.eigh(Q)
     assert np.allclose(w[:4], 0.0, atol=1e-9) and np.all(w[4:] > 0.0)
-    for v in V[:, 4:].T * 1e-4:  # a small turn along each orbit, about 3 mm at 30 m
+    for v in V[:, 4:].T * 1e-4:  # a small turn along each orbit (its unit vector's tenth of a millimetre)
         R = rotation(v[:3]) @ T[:3, :3]
         seen = R.T @ (centre - (c + v[3:]))
         assert np.allclose(seen / seen[2], [0.0, 0.0, 1.0], atol=1e-7)  # still on the optical axis
@@ -411,7 +411,7 @@ def test_a_camera_whose_turns_are_not_read_keeps_its_orbit_only_on_a_mount_that_
         kf.update(o)
     far = kf.cameras["far"]
     assert far.T_jacket_camera is not None and far.centre is not None
-    far.motion_scale, far.turns.level = 0.01, None
+    far.motion_scale, far.turns.level, far.lone_turns.level = 0.01, None, None
     prior = FilterTuning().motion(mount).angular_accel_psd
     orbit = orbit_psd(far.T_jacket_camera, far.centre, 1.0)
     v = np.linalg.eigh(orbit)[1][:, -1]  # an orbit's direction (6,)
@@ -420,6 +420,30 @@ def test_a_camera_whose_turns_are_not_read_keeps_its_orbit_only_on_a_mount_that_
     assert np.isclose(v @ kf._camera_psd(far) @ v, expected)
     far.turns.level = 1.0  # a turn read: the level holds every direction
     assert np.isclose(v @ kf._camera_psd(far) @ v, lowered)
+
+
+@pytest.mark.parametrize("mount", ["moving", "vessel"])
+def test_a_lone_markers_fits_give_a_turn_level_on_a_mount_that_orbits(mount: str) -> None:
+    """A camera whose jacket view is one marker, turned by hand about it (1 Hz, 0.5 rad/s, 6 frames a second, its
+    image still): on `moving` its lone fits give a turn level of their own, so its noise is not lowered below what
+    they show; elsewhere a lone far marker's fits are not read as turns (their covariance misses its view's biases)."""
+    from tracking.pose import BodyPose
+
+    kf = TopsideFilter(camera_rig(mount))
+    cam, marker = kf.cameras["far"], next(iter(kf.jacket_corners))
+    corners = {marker: np.array([[400.0, 300.0], [420.0, 300.0], [420.0, 320.0], [400.0, 320.0]])}
+    R = np.eye(3)
+    for k in range(60):
+        R = rotation([0.0, 0.5 * np.cos(2 * np.pi * k / 6.0) / 6.0, 0.0]) @ R
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, [0.0, 0.0, 20.0]
+        fit = BodyPose("jacket", (marker,), T, np.diag([1e-6] * 3 + [1e-4] * 3), 0.1, Choice.UNIQUE)
+        kf._measure_motion(cam, k / 6.0, corners, K, fit)
+    assert cam.turns.level is None  # no fit of two markers
+    if mount == "moving":
+        assert cam.lone_turns.level is not None and cam.turned == cam.lone_turns.level and cam.level >= 0.1
+    else:
+        assert cam.lone_turns.level is None and cam.turned is None
 
 
 def test_a_still_camera_jolted_takes_the_move_up_at_once() -> None:

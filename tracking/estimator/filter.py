@@ -97,7 +97,7 @@ class TopsideFilter(FilterState):
         pose swung away while the topside took the move, 141 mm off at σ 22 mm)."""
         psd = np.diag(camera_psds(self.tuning, cam.mount, cam.motion_scale))
         motion = self.tuning.motion(cam.mount)
-        if motion.orbits and cam.motion_scale < 1.0 and cam.turns.level is None and cam.centre is not None and \
+        if motion.orbits and cam.motion_scale < 1.0 and cam.turned is None and cam.centre is not None and \
                 cam.T_jacket_camera is not None:
             psd = psd + orbit_psd(cam.T_jacket_camera, cam.centre, (1.0 - cam.motion_scale) * motion.angular_accel_psd)
         return psd
@@ -112,11 +112,10 @@ class TopsideFilter(FilterState):
                 continue
             if jolted(self, cam, {i: z for i, z in o.corners.items() if i in self.jacket_corners}, o.K, o.time):
                 k = cam.index // STATE
-                full = block_noises(dt, np.array([camera_psds(self.tuning, cam.mount)]))[0]
-                extra = full - noise[k]
-                b = slice(cam.index, cam.index + STATE)
-                self.P[b, b] += extra
-                noise[k] = full
+                extra = block_noises(dt, np.array([camera_psds(self.tuning, cam.mount, 1.0 - cam.motion_scale)]))[0]
+                b = slice(cam.index, cam.index + STATE)  # (added to what it had: an orbit's noise beyond the prior
+                self.P[b, b] += extra  # stays)
+                noise[k] += extra
                 cam.motion_scale = 1.0  # until its motion level next says otherwise
                 self.jolts += 1
 
@@ -228,11 +227,11 @@ class TopsideFilter(FilterState):
     def _measure_motion(self, cam: CameraState, time: float, jacket: dict[int, np.ndarray], K: np.ndarray,
                         fit: BodyPose | None) -> None:
         """A frame's jacket corners and jacket fit into the camera's motion levels; its process noise scaled to the
-        larger of them (its images' motion, its turns where measured). A lone marker's fit counts too: a camera that
-        orbits its one jacket marker keeps that marker's image still, and the image's level alone then lowered its
-        noise while its pose swung where one marker's corners barely tell (caliscope's webcams with one marker a body:
-        poses 90 mm off at σ 10 mm, offsets 26 % beyond 3σ). Its covariance misses a far view's biases, which read as
-        turns: they can only raise the level, and a far marker's fits rarely pass POSE_MOTION_SNR."""
+        larger of them (its images' motion, its turns where measured). On a mount that orbits, a lone marker's fit
+        gives turns too (a level of its own): a camera orbiting its one jacket marker keeps that marker's image still,
+        and the image's level alone lowered its noise while its pose swung where one marker's corners barely tell
+        (caliscope's webcams with one marker a body: poses 90 mm off at σ 10 mm, offsets 26 % beyond 3σ). Elsewhere a
+        lone far marker's covariance misses its view's biases, which would read as turns (as in _jumped)."""
         prior = self.tuning.motion(cam.mount)
         if not prior.adapts or not jacket:
             return
@@ -240,7 +239,9 @@ class TopsideFilter(FilterState):
         cam.centre = self.centres[next(iter(jacket))] if len(jacket) == 1 else None  # (several markers' corners
         # tell an orbit about them: their images turn against each other)
         if fit is not None and fit.choice == Choice.UNIQUE:  # (an ambiguous fit's turn may be the other option's)
-            cam.turns.add(time, fit.T_camera_body[:3, :3], float(np.trace(fit.covariance[:3, :3])) / 3)
+            turns = cam.turns if len(fit.marker_ids) >= 2 else cam.lone_turns if prior.orbits else None
+            if turns is not None:
+                turns.add(time, fit.T_camera_body[:3, :3], float(np.trace(fit.covariance[:3, :3])) / 3)
         if cam.level is not None:  # the mount is a prior: what the camera's images show decides, up to the brisk
             cam.motion_scale = float(np.clip(cam.level / prior.angular_accel_psd, MOTION_FLOOR,
                                              max(1.0, MOTION_LEVEL_MAX / prior.angular_accel_psd)))

@@ -123,6 +123,8 @@ class CameraState:
     consecutive_rejects: int = 0
     motion: CameraMotionLevel = field(default_factory=lambda: CameraMotionLevel())
     turns: PoseMotionLevel = field(default_factory=lambda: PoseMotionLevel())  # its turns about its jacket markers
+    lone_turns: PoseMotionLevel = field(default_factory=lambda: PoseMotionLevel())  # the same from one marker's fits
+    # (their rotations are looser: apart, so they do not raise the noise median of the fits of several)
     corner_noise: CornerNoise = field(default_factory=lambda: CornerNoise())  # its corners' σ, measured
     model_px: float = 0.0  # its calibration's RMS reprojection error, px (BodyObservation.model_px)
     motion_scale: float = 1.0  # share of its mount's process noise the camera gets (1 until its level is known)
@@ -136,7 +138,14 @@ class CameraState:
     def level(self) -> float | None:
         """How much the camera moves, rad²/s³: the larger of its images' level and its turns' (None until the images'
         is measured)."""
-        return None if self.motion.level is None else max(self.motion.level, self.turns.level or 0.0)
+        return None if self.motion.level is None else max(self.motion.level, self.turned or 0.0)
+
+    @property
+    def turned(self) -> float | None:
+        """How fast its own fits say it turns, rad²/s³: the larger of its two turn levels (None where neither reads
+        one)."""
+        levels = [level for level in (self.turns.level, self.lone_turns.level) if level is not None]
+        return max(levels) if levels else None
 
 
 
