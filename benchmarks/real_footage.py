@@ -34,6 +34,7 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from tracking.estimator import ESTIMATORS
 from tracking.geometry import rt_to_T
+from tracking.outputs import write_text
 from tracking.pipeline import TrackStats, track_rig
 from tracking.rig import Rig, load_rig
 
@@ -223,9 +224,8 @@ def stacked_pairs(rig: Rig) -> list[tuple[int, int]]:
 
 def pairs_markdown(name: str, rig: Rig) -> str:
     """One session's table of its stacked pairs, each tracked alone by every camera: one marker a body, as offshore."""
-    rows = []
+    rows, markers = [], rig.marker_by_id
     for jacket, topside in stacked_pairs(rig):
-        markers = {m.id: m for m in rig.markers}
         gap = np.linalg.norm(np.subtract(markers[topside].center, markers[jacket].center)) / rig.marker_size
         pair = rig.model_copy(update={"markers": [markers[jacket], markers[topside]]})
         rows += alone(f"{jacket} / {topside} ({gap:.1f} sides apart)", pair)
@@ -265,40 +265,59 @@ def markdown(name: str, s: dict) -> str:
     return "\n".join(lines)
 
 
+VARIANTS = {  # flag -> (its help, what the file says of it); the default tracks the rig as given, fused and smoothed
+    "unstated": ("track with the calibrations' stated RMS errors removed",
+                 "Calibrations read without their stated RMS error (`--unstated`), as a camera maker's or ROS's file "
+                 "comes: each taken as `UNSTATED_RMS_PX` (tracking/camera.py)."),
+    "self-calibrated": ("track with each camera calibrated by `topside calibrate` from its own video of the session's "
+                        "board",
+                        "Every camera calibrated from its own video of the session's board (`--self-calibrated`), as "
+                        "`topside calibrate` and `import-caliscope` do, not by caliscope's calibrations: what a user "
+                        "with only the footage gets. A calibration whose board covered under 60 % of the picture "
+                        "states the lens model's error as at least 0.5 px, whatever its fit (tracking/calibration.py, "
+                        "COVERAGE_WARN): each session's table says each camera's."),
+    "each-camera": ("track every camera alone",
+                    "Every camera tracked alone (`--each-camera`): a rig of that camera only, as a cone one camera "
+                    "sees, whose depth rests on the markers' size and shape in one view. Shown: the share of the "
+                    "camera's frames showing both groups at whose capture time an offset is shown."),
+    "pairs": ("track every stacked pair of the board alone, one marker a body as offshore",
+              "Every stacked pair of the board tracked alone (`--pairs`): a rig of one jacket marker and the topside "
+              "marker above it, as a cone's pair stands offshore, seen by every camera. Each camera's pose then rests "
+              "on one marker a frame, whose turn its corners barely tell. Shown: the share of the frames showing both "
+              "markers at whose capture time an offset is shown."),
+}
+
+
+def session_markdown(name: str, rig_path: Path, variant: str | None, board: Path) -> str:
+    """One session's tables in a variant (None: the rig as given; board: the folder of its board, its cameras'
+    videos for --self-calibrated)."""
+    if variant == "each-camera":
+        return each_camera_markdown(name, load_rig(rig_path))
+    if variant == "pairs":
+        return pairs_markdown(name, load_rig(rig_path))
+    return markdown(name, session(rig_path, variant == "unstated", board if variant == "self-calibrated" else None))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sessions", type=Path, nargs="*", default=None,
                         help="other caliscope session folders, imported as `topside import-caliscope` does")
     parser.add_argument("--out", type=Path, default=None, help=f"markdown to write (default {RESULTS.name}, or "
                                                                "real_footage-caliscope.md with --sessions)")
-    calibrations = parser.add_mutually_exclusive_group()
-    calibrations.add_argument("--unstated", action="store_true",
-                              help="track with the calibrations' stated RMS errors removed (files suffixed -unstated)")
-    calibrations.add_argument("--self-calibrated", action="store_true",
-                        help="track with each camera calibrated by `topside calibrate` from its own video of the "
-                             "session's board (files suffixed -self-calibrated)")
-    apart = parser.add_mutually_exclusive_group()
-    apart.add_argument("--each-camera", action="store_true",
-                       help="track every camera alone (files suffixed -each-camera; the calibrations as given)")
-    apart.add_argument("--pairs", action="store_true",
-                       help="track every stacked pair of the board alone, one marker a body as offshore (files "
-                            "suffixed -pairs; the calibrations as given)")
+    variants = parser.add_mutually_exclusive_group()
+    for flag, (text, _) in VARIANTS.items():
+        variants.add_argument(f"--{flag}", action="store_true", help=f"{text} (files suffixed -{flag})")
     args = parser.parse_args()
-    suffix = "-unstated" if args.unstated else "-self-calibrated" if args.self_calibrated else ""
-    if args.each_camera or args.pairs:
-        if args.unstated or args.self_calibrated:
-            parser.error("--each-camera and --pairs take the calibrations as given")
-        suffix = "-each-camera" if args.each_camera else "-pairs"
+    variant = next((flag for flag in VARIANTS if getattr(args, flag.replace("-", "_"))), None)
+    suffix = f"-{variant}" if variant else ""
     if args.sessions is None:
         parts = ["# Real footage: four webcams and a hand-held board", "",
                  f"Generated by `benchmarks/real_footage.py{suffix.replace('-', ' --', 1)}` "
                  "from ../shared/data/caliscope (benchmarks/real/build.py "
                  "writes the rigs). The true offset is zero at every instant: the board is rigid.", ""]
         for name in SESSIONS:
-            board = REPO.parent / "shared" / "data" / "caliscope" / name if args.self_calibrated else None
-            parts += [each_camera_markdown(name, load_rig(REAL / name / "rig.yaml")) if args.each_camera else
-                      pairs_markdown(name, load_rig(REAL / name / "rig.yaml")) if args.pairs else
-                      markdown(name, session(REAL / name / "rig.yaml", args.unstated, board)), ""]
+            board = REPO.parent / "shared" / "data" / "caliscope" / name
+            parts += [session_markdown(name, REAL / name / "rig.yaml", variant, board), ""]
         out = args.out or RESULTS.with_name(f"{RESULTS.stem}{suffix}.md")
     else:
         from tracking.caliscope import read_session, write_session
@@ -310,32 +329,13 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as work:
             for folder in args.sessions:
                 rig_path = write_session(read_session(folder), Path(work) / folder.name)
-                parts += [each_camera_markdown(folder.name, load_rig(rig_path)) if args.each_camera else
-                          pairs_markdown(folder.name, load_rig(rig_path)) if args.pairs else
-                          markdown(folder.name, session(rig_path, args.unstated,
-                                                        folder if args.self_calibrated else None)), ""]
+                parts += [session_markdown(folder.name, rig_path, variant, folder), ""]
         out = args.out or RESULTS.with_name(f"real_footage-caliscope{suffix}.md")
-    if args.unstated:
-        parts.insert(2, "Calibrations read without their stated RMS error (`--unstated`), as a camera maker's or ROS's "
-                        "file comes: each taken as `UNSTATED_RMS_PX` (tracking/camera.py).\n")
-    if args.each_camera:
-        parts.insert(2, "Every camera tracked alone (`--each-camera`): a rig of that camera only, as a cone one camera "
-                        "sees, whose depth rests on the markers' size and shape in one view. Shown: the share of the "
-                        "camera's frames showing both groups at whose capture time an offset is shown.\n")
-    if args.pairs:
-        parts.insert(2, "Every stacked pair of the board tracked alone (`--pairs`): a rig of one jacket marker and the "
-                        "topside marker above it, as a cone's pair stands offshore, seen by every camera. Each "
-                        "camera's pose then rests on one marker a frame, whose turn its corners barely tell. Shown: "
-                        "the share of the frames showing both markers at whose capture time an offset is shown.\n")
-    if args.self_calibrated:
-        parts.insert(2, "Every camera calibrated from its own video of the session's board (`--self-calibrated`), as "
-                        "`topside calibrate` and `import-caliscope` do, not by caliscope's calibrations: what a user "
-                        "with only the footage gets. A calibration whose board covered under 60 % of the picture "
-                        "states the lens model's error as at least 0.5 px, whatever its fit (tracking/calibration.py, "
-                        "COVERAGE_WARN): each session's table says each camera's.\n")
+    if variant:
+        parts.insert(2, VARIANTS[variant][1] + "\n")
     text = "\n".join(parts)
     print(text)
-    out.write_text(text)
+    write_text(out, text)
 
 
 if __name__ == "__main__":

@@ -112,7 +112,7 @@ class TopsideFilter(FilterState):
                 continue
             if jolted(self, cam, {i: z for i, z in o.corners.items() if i in self.jacket_corners}, o.K, o.time):
                 k = cam.index // STATE
-                extra = block_noises(dt, np.array([camera_psds(self.tuning, cam.mount, 1.0 - cam.motion_scale)]))[0]
+                extra = block_noises(dt, np.diag(camera_psds(self.tuning, cam.mount, 1.0 - cam.motion_scale))[None])[0]
                 b = slice(cam.index, cam.index + STATE)  # (added to what it had: an orbit's noise beyond the prior
                 self.P[b, b] += extra  # stays)
                 noise[k] += extra

@@ -155,10 +155,8 @@ class FilterTuning:
 
 
 def block_noises(dt: float, psds: np.ndarray) -> np.ndarray:
-    """(B, 12, 12) white-noise-acceleration process noise of B bodies, psds (B, 6) per pose axis or (B, 6, 6) across
-    them."""
+    """(B, 12, 12) white-noise-acceleration process noise of B bodies, their pose's acceleration psds (B, 6, 6)."""
     q = np.asarray(psds, dtype=float)
-    q = q.reshape(-1, 6)[:, :, None] * np.eye(6) if q.ndim < 3 else q
     Q = np.zeros((len(q), STATE, STATE))
     Q[:, :6, :6] = q * dt**3 / 3
     Q[:, :6, 6:] = Q[:, 6:, :6] = q * dt**2 / 2
